@@ -1,0 +1,358 @@
+"""Configuration: frozen, self-validating dataclasses and their resolution.
+
+Resolution order is *preset < TOML file < flags*. The preset is the Exeter bascule bridge east girder of
+the paper (Table 3) with the vehicle of the chosen case study. Every value is SI: metres, seconds,
+newtons, kilograms, EI in N m^2.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import InputError
+
+CASES = ("deflection", "strain")
+
+#: Exeter bascule girder (paper Table 3): E = 205 GPa, I = 50.42e8 mm^4.
+EXETER_EI = 205e9 * 50.42e8 * 1e-12  # = 1.03361e9 N m^2
+EXETER_SPEED = 7.115  # m/s, from 17.28 m + 6.50 m crossed in 3.342 s
+#: Four-axle test truck (paper section 3.1), 55 % carried by the east girder.
+TRUCK_AXLE_LOADS = (67.2e3, 67.2e3, 89.8e3, 89.8e3)  # N, whole truck
+TRUCK_SPACINGS = (2.00, 3.10, 1.40)  # m
+EAST_GIRDER_SHARE = 0.55
+
+
+def _check_number(name: str, value: Any, *, positive: bool = False, nonneg: bool = False) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise InputError(name, value, "a number")
+    v = float(value)
+    if not math.isfinite(v):
+        raise InputError(name, value, "a finite number")
+    if positive and v <= 0:
+        raise InputError(name, value, "a finite number > 0")
+    if nonneg and v < 0:
+        raise InputError(name, value, "a finite number >= 0")
+    return v
+
+
+def _check_int(name: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int | np.integer):
+        raise InputError(name, value, f"an integer >= {minimum}")
+    if value < minimum:
+        raise InputError(name, value, f"an integer >= {minimum}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class Beam:
+    """A simply supported Euler-Bernoulli girder.
+
+    Attributes
+    ----------
+    length : float, span L [m]
+    EI : float, flexural rigidity [N m^2] (the truth for synthetic data)
+    mass_per_length : float, mu [kg/m]
+    section_depth : float, overall depth [m]; flange fibres sit at y = -depth/2 (top), +depth/2 (bottom)
+    damping_ratio : float, modal damping ratio zeta [-], 0 by default as in the paper
+    """
+
+    length: float = 17.28
+    EI: float = EXETER_EI
+    mass_per_length: float = 289.0
+    section_depth: float = 0.9266
+    damping_ratio: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("length", "EI", "mass_per_length", "section_depth"):
+            object.__setattr__(self, name, _check_number(f"beam.{name}", getattr(self, name), positive=True))
+        z = _check_number("beam.damping_ratio", self.damping_ratio, nonneg=True)
+        if z >= 1:
+            raise InputError("beam.damping_ratio", self.damping_ratio, "a number in [0, 1)")
+        object.__setattr__(self, "damping_ratio", z)
+
+    def natural_frequency(self, n: int = 1, EI: float | None = None) -> float:
+        """Circular natural frequency of mode n [rad/s]."""
+        ei = self.EI if EI is None else EI
+        return (n * math.pi / self.length) ** 2 * math.sqrt(ei / self.mass_per_length)
+
+
+@dataclass(frozen=True)
+class Axle:
+    """One axle: load [N] and offset [m] behind the first axle."""
+
+    load: float
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "load", _check_number("vehicle.axles.load", self.load, positive=True))
+        object.__setattr__(self, "offset", _check_number("vehicle.axles.offset", self.offset, nonneg=True))
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """Axles crossing at constant speed; the first axle enters the span at t = 0."""
+
+    speed: float = EXETER_SPEED
+    axles: tuple[Axle, ...] = (Axle(37000.0, 0.0),)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "speed", _check_number("vehicle.speed", self.speed, positive=True))
+        axles = tuple(self.axles)
+        if not axles:
+            raise InputError("vehicle.axles", list(axles), "at least one axle")
+        if not all(isinstance(a, Axle) for a in axles):
+            raise InputError("vehicle.axles", axles, "a list of {load, offset} tables")
+        object.__setattr__(self, "axles", axles)
+
+    @property
+    def loads(self) -> np.ndarray:
+        """Axle loads [N], shape (J,)."""
+        return np.array([a.load for a in self.axles], dtype=float)
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Axle offsets behind the first axle [m], shape (J,)."""
+        return np.array([a.offset for a in self.axles], dtype=float)
+
+    @property
+    def delays(self) -> np.ndarray:
+        """Time at which each axle enters the span [s], shape (J,)."""
+        return self.offsets / self.speed
+
+    def duration(self, length: float) -> float:
+        """T: first axle entering to last axle leaving [s]."""
+        return (length + float(self.offsets.max())) / self.speed
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A strain gauge: name, position along the span x [m], fibre distance y [m] (+ down)."""
+
+    name: str
+    x: float
+    y: float
+
+
+@dataclass(frozen=True)
+class DataSpec:
+    """How synthetic data are sampled.
+
+    n_points : random (x, t) deflection samples (deflection case)
+    sample_rate : strain time-series rate [Hz] (strain case)
+    sensors : strain gauges; empty means the paper's S1-S4 layout for the beam
+    """
+
+    n_points: int = 100
+    sample_rate: float = 200.0
+    sensors: tuple[Sensor, ...] = ()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "n_points", _check_int("data.n_points", self.n_points, 2))
+        object.__setattr__(
+            self, "sample_rate", _check_number("data.sample_rate", self.sample_rate, positive=True)
+        )
+        object.__setattr__(self, "sensors", tuple(self.sensors))
+
+
+@dataclass(frozen=True)
+class PriorSpec:
+    """Log-normal prior on EI: median [N m^2] and sd of log(EI)."""
+
+    EI_median: float = 1.0e9
+    EI_log_sd: float = 0.5
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "EI_median", _check_number("prior.EI_median", self.EI_median, positive=True))
+        object.__setattr__(self, "EI_log_sd", _check_number("prior.EI_log_sd", self.EI_log_sd, positive=True))
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything that defines a problem: the beam, the vehicle, the sampling and the prior."""
+
+    case: str = "deflection"
+    beam: Beam = field(default_factory=Beam)
+    vehicle: Vehicle = field(default_factory=Vehicle)
+    data: DataSpec = field(default_factory=DataSpec)
+    prior: PriorSpec = field(default_factory=PriorSpec)
+
+    def __post_init__(self) -> None:
+        if self.case not in CASES:
+            raise InputError("--case", self.case, "one of " + ", ".join(CASES))
+        for s in self.sensors:
+            if not 0.0 <= s.x <= self.beam.length:
+                raise InputError(f"data.sensors {s.name}.x", s.x, f"a position in [0, {self.beam.length}] m")
+
+    @property
+    def duration(self) -> float:
+        """T [s]: first axle in to last axle out."""
+        return self.vehicle.duration(self.beam.length)
+
+    @property
+    def sensors(self) -> tuple[Sensor, ...]:
+        """Strain gauges: the configured ones, else the paper's S1-S4 layout scaled to the span."""
+        if self.data.sensors:
+            return self.data.sensors
+        L, h = self.beam.length, self.beam.section_depth / 2
+        return (
+            Sensor("S1", L / 3, -h),
+            Sensor("S2", L / 2, -h),
+            Sensor("S3", L / 3, +h),
+            Sensor("S4", 2 * L / 3, +h),
+        )
+
+    def to_dict(self) -> dict:
+        """Plain-dict form for manifests (SI units)."""
+        return {
+            "case": self.case,
+            "beam": {f.name: getattr(self.beam, f.name) for f in fields(Beam)},
+            "vehicle": {
+                "speed": self.vehicle.speed,
+                "axles": [{"load": a.load, "offset": a.offset} for a in self.vehicle.axles],
+            },
+            "data": {
+                "n_points": self.data.n_points,
+                "sample_rate": self.data.sample_rate,
+                "sensors": [{"name": s.name, "x": s.x, "y": s.y} for s in self.sensors],
+            },
+            "prior": {"EI_median": self.prior.EI_median, "EI_log_sd": self.prior.EI_log_sd},
+        }
+
+
+def truck_vehicle(speed: float = EXETER_SPEED, share: float = EAST_GIRDER_SHARE) -> Vehicle:
+    """The paper's four-axle test truck, the girder's share of each axle."""
+    offsets = np.concatenate([[0.0], np.cumsum(TRUCK_SPACINGS)])
+    return Vehicle(speed, tuple(Axle(share * p, float(o)) for p, o in zip(TRUCK_AXLE_LOADS, offsets, strict=True)))
+
+
+def preset(case: str = "deflection") -> Config:
+    """The Exeter bascule bridge preset for a case study."""
+    if case not in CASES:
+        raise InputError("--case", case, "one of " + ", ".join(CASES))
+    vehicle = Vehicle() if case == "deflection" else truck_vehicle()
+    return Config(case=case, vehicle=vehicle)
+
+
+_SECTIONS = {
+    "beam": {f.name for f in fields(Beam)},
+    "vehicle": {"speed", "axles"},
+    "data": {"n_points", "sample_rate", "sensors"},
+    "prior": {f.name for f in fields(PriorSpec)},
+}
+
+
+def _table(doc: dict, name: str) -> dict:
+    t = doc.get(name, {})
+    if not isinstance(t, dict):
+        raise InputError(f"[{name}]", t, "a TOML table")
+    unknown = set(t) - _SECTIONS[name]
+    if unknown:
+        key = sorted(unknown)[0]
+        raise InputError(f"{name}.{key}", t[key], "one of the keys " + ", ".join(sorted(_SECTIONS[name])))
+    return t
+
+
+def _build(cls, name: str, base, values: dict):
+    try:
+        return replace(base, **values)
+    except TypeError as exc:  # pragma: no cover - guarded by the key check above
+        raise InputError(name, values, str(exc)) from None
+
+
+def _axles(raw: Any) -> tuple[Axle, ...]:
+    if not isinstance(raw, list) or not raw:
+        raise InputError("vehicle.axles", raw, "a non-empty list of { load = N, offset = m } tables")
+    out = []
+    for i, a in enumerate(raw):
+        if not isinstance(a, dict) or "load" not in a or set(a) - {"load", "offset"}:
+            raise InputError(f"vehicle.axles[{i}]", a, "a table { load = N, offset = m }")
+        load = _check_number(f"vehicle.axles[{i}].load", a["load"], positive=True)
+        off = _check_number(f"vehicle.axles[{i}].offset", a.get("offset", 0.0), nonneg=True)
+        out.append(Axle(load, off))
+    if min(a.offset for a in out) != 0.0:
+        raise InputError("vehicle.axles", raw, "the first axle at offset 0 (offsets are behind the first axle)")
+    return tuple(out)
+
+
+def _sensors(raw: Any) -> tuple[Sensor, ...]:
+    if not isinstance(raw, list):
+        raise InputError("data.sensors", raw, "a list of { name, x, y } tables")
+    out = []
+    for i, s in enumerate(raw):
+        if not isinstance(s, dict) or set(s) != {"name", "x", "y"}:
+            raise InputError(f"data.sensors[{i}]", s, "a table { name = 'S1', x = m, y = m }")
+        out.append(
+            Sensor(str(s["name"]), _check_number(f"data.sensors[{i}].x", s["x"]),
+                   _check_number(f"data.sensors[{i}].y", s["y"]))
+        )
+    return tuple(out)
+
+
+def load_toml(path: str | Path) -> dict:
+    """Read a configuration TOML into a dict; bad files raise `InputError`."""
+    p = Path(path)
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise InputError("--config", str(path), "an existing TOML file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError("--config", str(path), f"a readable UTF-8 TOML file ({exc.__class__.__name__})") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError("--config", str(path), f"valid TOML ({exc})") from None
+    unknown = set(doc) - set(_SECTIONS)
+    if unknown:
+        key = sorted(unknown)[0]
+        raise InputError(f"[{key}]", doc[key], "one of the tables " + ", ".join(sorted(_SECTIONS)))
+    return doc
+
+
+def resolve(case: str = "deflection", toml: str | Path | dict | None = None) -> Config:
+    """Preset for `case`, overridden by a TOML file (path) or an already parsed dict."""
+    cfg = preset(case)
+    if toml is None:
+        return cfg
+    doc = load_toml(toml) if not isinstance(toml, dict) else toml
+    beam_t = _table(doc, "beam")
+    beam = _build(Beam, "beam", cfg.beam, beam_t)
+    veh_t = dict(_table(doc, "vehicle"))
+    if "axles" in veh_t:
+        veh_t["axles"] = _axles(veh_t["axles"])
+    vehicle = _build(Vehicle, "vehicle", cfg.vehicle, veh_t)
+    data_t = dict(_table(doc, "data"))
+    if "sensors" in data_t:
+        data_t["sensors"] = _sensors(data_t["sensors"])
+    data = _build(DataSpec, "data", cfg.data, data_t)
+    prior = _build(PriorSpec, "prior", cfg.prior, _table(doc, "prior"))
+    return Config(case=case, beam=beam, vehicle=vehicle, data=data, prior=prior)
+
+
+def parse_snr(value: str | float | None, field_name: str = "--snr") -> float | None:
+    """`clean` -> None (sigma = 0); otherwise a finite number of dB > 0."""
+    if value is None:
+        return None
+    if isinstance(value, str):
+        s = value.strip().lower()
+        if s == "clean":
+            return None
+        try:
+            v = float(s)
+        except ValueError:
+            raise InputError(field_name, value, "'clean' or a finite number of dB > 0") from None
+    else:
+        v = float(value)
+    if not math.isfinite(v) or v <= 0:
+        raise InputError(field_name, value, "'clean' or a finite number of dB > 0")
+    return v
+
+
+def snr_label(snr_db: float | None) -> str:
+    """'clean' or the dB value without trailing zeros, for folder names and reports."""
+    return "clean" if snr_db is None else f"{snr_db:g}"
