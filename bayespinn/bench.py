@@ -1,0 +1,60 @@
+"""`bayespinn bench`: performance figures (contract schema bayespinn.bench/1)."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+
+from .config import preset
+
+log = logging.getLogger(__name__)
+
+#: walkers evaluated per vectorised likelihood call in the benchmark (emcee with 2 x 16 walkers)
+BENCH_BATCH = 32
+
+
+def bench_modal(n_points: int = 100, n_modes: int = 10, batch: int = BENCH_BATCH, seconds: float = 2.0) -> dict:
+    """Gaussian log-likelihood evaluations per second of the modal surrogate, one EI value per evaluation,
+    `batch` EI values per vectorised call (as emcee calls it)."""
+    from .physics.modal import ModalModel
+
+    cfg = preset("deflection")
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, cfg.beam.length, n_points)
+    t = rng.uniform(0, cfg.duration, n_points)
+    m = ModalModel(cfg.beam, cfg.vehicle, x, t, n_modes=n_modes)
+    y = m.predict(cfg.beam.EI) + 1e-4 * rng.standard_normal(n_points)
+
+    def loglik(ei, sig):
+        r = y[None, :] - m.predict(ei)
+        return -0.5 * np.einsum("wp,wp->w", r, r) / sig**2 - n_points * np.log(sig)
+
+    out = {"points": n_points, "modes": n_modes, "batch": batch}
+    for name, w in (("likelihood_evals_per_s", batch), ("unbatched_evals_per_s", 1)):
+        ei = cfg.beam.EI * np.exp(0.05 * rng.standard_normal(w))
+        loglik(ei, 1e-4)
+        n, t0 = 0, time.perf_counter()
+        while time.perf_counter() - t0 < seconds / 2:
+            loglik(ei, 1e-4)
+            n += w
+        out[name] = n / (time.perf_counter() - t0)
+    return out
+
+
+def bench(device: str = "cpu", progress: bool = True) -> dict:
+    """All sections: derivatives (Taylor vs nested autograd), ensemble (sequential vs together), modal."""
+    import torch
+
+    from .pinn.bench import bench_derivatives, bench_ensemble
+
+    threads = torch.get_num_threads()
+    res = {"schema": "bayespinn.bench/1", "device": device, "threads": threads}
+    log.info("bench: derivatives (Taylor mode vs nested autograd) ...")
+    res["derivatives"] = bench_derivatives(device=device)
+    log.info("bench: ensemble (sequential vs together) ...")
+    res["ensemble"] = bench_ensemble(device=device)
+    log.info("bench: modal likelihood ...")
+    res["modal"] = bench_modal()
+    return res

@@ -1,0 +1,187 @@
+"""`run`: data -> posteriors of each method -> a report folder, written all-or-nothing."""
+
+from __future__ import annotations
+
+import json
+import logging
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .config import Config
+from .data.measurements import Measurements, read_csv
+from .data.synthetic import realised_snr, sigma_for_snr, simulate
+from .errors import InputError
+from .uq.methods import KEYS, RunOptions, infer
+from .uq.posterior import Posterior, _jsonable
+
+log = logging.getLogger(__name__)
+
+#: deflections above this are almost surely in mm, strains above this in microstrain
+WRONG_UNIT = {"deflection": 0.5, "strain": 1e-2}
+
+
+@dataclass
+class RunResult:
+    """What `run` produced: data, truth (or None), posteriors by summary key, summary dict, timings."""
+
+    data: Measurements
+    truth: dict | None
+    posteriors: dict[str, Posterior]
+    summary: dict
+    manifest: dict
+
+
+def versions() -> dict:
+    out = {"python": platform.python_version(), "bayespinn": __version__}
+    for pkg in ("numpy", "scipy", "torch", "pyro-ppl", "emcee", "arviz", "matplotlib"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = None
+    return out
+
+
+def git_commit() -> str | None:
+    try:
+        r = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=5
+        )
+        return r.stdout.strip() or None if r.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def unit_warnings(data: Measurements) -> list[str]:
+    """Warnings for values that look like the wrong unit (mm or microstrain instead of SI)."""
+    out = []
+    for kind, lim in WRONG_UNIT.items():
+        v = np.abs(data.value[data.kind == kind])
+        if v.size and float(v.max()) > lim:
+            unit = "m" if kind == "deflection" else "strain (dimensionless)"
+            out.append(
+                f"{kind} values up to {float(v.max()):.3g} look like the wrong unit: files are SI ({unit})"
+            )
+    return out
+
+
+def load_data(cfg: Config, data_path: str | None, snr_db: float | None, seed: int) -> tuple[Measurements, dict | None]:
+    """Measured data (truth None) or synthetic data at snr_db (truth: EI and sigma)."""
+    if data_path is not None:
+        data = read_csv(data_path, cfg.beam.length)
+        cases = set(data.kind.tolist())
+        if cfg.case not in cases and len(cases) == 1:
+            cfg_case = next(iter(cases))
+            raise InputError("--case", cfg.case, f"'{cfg_case}' to match the kind of the rows in {data_path}")
+        return data, None
+    data = simulate(cfg, snr_db, seed)
+    sigma = sigma_for_snr(data.value_true, snr_db)
+    return data, {"EI": cfg.beam.EI, "sigma": sigma}
+
+
+@contextmanager
+def staged_output(out: Path):
+    """Yield a staging folder; on success move its files into `out`, on failure leave `out` untouched."""
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(prefix=".partial-", dir=out))
+    try:
+        yield stage
+        for f in sorted(stage.iterdir()):
+            # summary.json last, so a reader that sees it sees everything
+            if f.name != "summary.json":
+                f.replace(out / f.name)
+        if (stage / "summary.json").exists():
+            (stage / "summary.json").replace(out / "summary.json")
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        if created and not any(out.iterdir()):
+            out.rmdir()
+        raise
+    shutil.rmtree(stage, ignore_errors=True)
+
+
+def run(
+    cfg: Config,
+    *,
+    methods: list[str],
+    snr_db: float | None,
+    seed: int = 0,
+    data_path: str | None = None,
+    out: str | Path,
+    opts: RunOptions | None = None,
+    argv: list[str] | None = None,
+    write_report: bool = True,
+) -> RunResult:
+    """Simulate or load data, run each method, write the contract's files into `out`."""
+    t_start = time.perf_counter()
+    opts = replace(opts or RunOptions(), snr_db=snr_db if data_path is None else None)
+    data, truth = load_data(cfg, data_path, snr_db, seed)
+    for w in unit_warnings(data):
+        log.warning("warning: %s", w)
+    posts: dict[str, Posterior] = {}
+    timings = {}
+    for m in methods:
+        log.info("[%s] running on %d %s measurements", KEYS[m], len(data), data.case)
+        p = infer(m, data, cfg, seed, opts)
+        posts[KEYS[m]] = p
+        timings[KEYS[m]] = p.runtime_s
+        s = p.summary(truth)["EI"]
+        log.info(
+            "[%s] EI = %.4g N m^2 (sd %.3g, 90%% [%.4g, %.4g]) in %.1f s",
+            KEYS[m], s["mean"], s["sd"], s["ci90"][0], s["ci90"][1], p.runtime_s,
+        )
+    summary = {
+        "schema": "bayespinn.summary/1",
+        "case": cfg.case,
+        "snr_db": snr_db if data_path is None else None,
+        "seed": seed,
+        "profile": opts.profile,
+        "truth": truth,
+        "methods": {k: p.summary(truth) for k, p in posts.items()},
+    }
+    if data_path is None and snr_db is not None:
+        summary["realised_snr_db"] = realised_snr(data.value, data.value_true)
+    timings["total_s"] = time.perf_counter() - t_start
+    manifest = {
+        "schema": "bayespinn.manifest/1",
+        "command": argv if argv is not None else sys.argv,
+        "config": cfg.to_dict(),
+        "seed": seed,
+        "snr_db": summary["snr_db"],
+        "data": str(data_path) if data_path else "synthetic (finite-element reference, point loads)",
+        "methods": list(posts),
+        "options": {
+            "profile": opts.profile, "members": opts.members, "noise_prior": opts.noise_prior, "device": opts.device
+        },
+        "device": opts.device,
+        "versions": versions(),
+        "git_commit": git_commit(),
+        "timings_s": timings,
+    }
+    result = RunResult(data, truth, posts, summary, manifest)
+    with staged_output(Path(out)) as stage:
+        data.to_csv(stage / "data.csv")
+        for k, p in posts.items():
+            p.to_netcdf(stage / f"posterior_{k}.nc")
+        if write_report:
+            from .report import write_reports
+
+            write_reports(result, cfg, stage)
+        _write_json(stage / "manifest.json", manifest)
+        _write_json(stage / "summary.json", summary)
+    return result
+
+
+def _write_json(path: Path, obj: dict) -> None:
+    path.write_text(json.dumps(_jsonable(obj), indent=2) + "\n", encoding="utf-8")
