@@ -93,6 +93,10 @@ def coverage_study(
     """Run the study; returns the contract's coverage JSON (plus per-replicate records)."""
     t0 = time.perf_counter()
     opts = dataclasses.replace(opts or RunOptions(), snr_db=snr_db, progress=False)
+    if method == "modal" and opts.mcmc is None:
+        from .sampler import MCMCSettings
+
+        opts = dataclasses.replace(opts, mcmc=MCMCSettings.for_coverage())
     tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in range(replicates)]
     recs = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress)
     hits = int(sum(r["hit"] for r in recs))

@@ -28,6 +28,7 @@ class RunOptions:
     snr_db: float | None = None
     progress: bool = False
     executor: object = None  # bayespinn.executor.Executor for ensemble members
+    mcmc: object = None  # bayespinn.uq.sampler.MCMCSettings overriding the profile's
 
 
 def noise_prior(data: Measurements, opts: RunOptions) -> NoisePrior:
@@ -44,7 +45,7 @@ def infer(method: str, data: Measurements, cfg: Config, seed: int | np.random.Se
             cfg,
             noise_prior=noise_prior(data, opts),
             seed=seeding.stream(seed, "emcee"),
-            settings=MCMCSettings.for_profile(opts.profile),
+            settings=opts.mcmc or MCMCSettings.for_profile(opts.profile),
             progress=opts.progress,
         )
     if method == "ensemble":

@@ -13,7 +13,6 @@ import logging
 import math
 import time
 import warnings
-from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -24,30 +23,12 @@ from ..data.measurements import Measurements
 from ..physics.modal import ModalModel
 from .posterior import Posterior, mcmc_diagnostics
 from .priors import EIPrior, NoisePrior
+from .sampler import ESS_MIN, RHAT_MAX, MCMCSettings, sample
 
 log = logging.getLogger(__name__)
 
 #: modal truncation must stay below this fraction of the noise sd
 TRUNCATION_FRACTION = 0.01
-#: convergence thresholds written into summary.json
-RHAT_MAX, ESS_MIN = 1.01, 400.0
-
-
-@dataclass(frozen=True)
-class MCMCSettings:
-    """emcee run: walkers per group, groups, run length rules."""
-
-    n_walkers: int = 16
-    n_groups: int = 4
-    chunk: int = 250
-    min_steps: int = 750
-    max_steps: int = 40000
-    tau_factor: float = 50.0
-    burn_factor: float = 5.0
-
-    @classmethod
-    def for_profile(cls, profile: str) -> MCMCSettings:
-        return cls(min_steps=400, tau_factor=30.0) if profile == "smoke" else cls()
 
 
 class ModalLikelihood:
@@ -116,6 +97,22 @@ class LogPosterior:
         return le, self.profile_sigma(le), min(sd, prior.log_sd)
 
 
+class MarginalLogPosterior:
+    """log p(log EI | data) with sigma integrated out under the log-uniform (Jeffreys) prior:
+    log prior(EI) - (n/2) log RSS(EI). Call with theta shaped (W, 1)."""
+
+    def __init__(self, lik: ModalLikelihood, ei_prior: EIPrior):
+        self.lik, self.ei_prior = lik, ei_prior
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        le = np.atleast_2d(theta)[:, 0]
+        out = np.full(le.shape, -np.inf)
+        ok = np.abs(le - self.ei_prior.loc) < 12 * self.ei_prior.log_sd
+        if ok.any():
+            out[ok] = self.ei_prior.logpdf(le[ok]) - 0.5 * self.lik.n * np.log(self.lik.rss(np.exp(le[ok])))
+        return out
+
+
 def choose_modes(cfg: Config, data: Measurements, EI: float, sigma: float, start: int = 6, cap: int = 64):
     """Smallest mode count whose truncation error (against twice as many modes) is below
     TRUNCATION_FRACTION x sigma; returns (n_modes, max abs truncation error)."""
@@ -132,11 +129,6 @@ def choose_modes(cfg: Config, data: Measurements, EI: float, sigma: float, start
         n *= 2
 
 
-def _group_chain(chain: np.ndarray) -> np.ndarray:
-    """(step, walker, dim) -> (walker * step, dim): each walker's trajectory in turn."""
-    return np.transpose(chain, (1, 0, 2)).reshape(-1, chain.shape[-1])
-
-
 def modal_posterior(
     data: Measurements,
     cfg: Config,
@@ -151,8 +143,6 @@ def modal_posterior(
     Returns a Posterior with draws shaped (walker, draw) over all groups, diagnostics (R-hat, bulk and
     tail ESS, autocorrelation time, steps, modes, truncation error, converged) and MAP information.
     """
-    import emcee
-
     t0 = time.perf_counter()
     s = settings or MCMCSettings()
     ei_prior = EIPrior.from_spec(cfg.prior)
@@ -164,67 +154,62 @@ def modal_posterior(
         lik = ModalLikelihood(cfg, data, n_modes=n_modes)
         post = LogPosterior(lik, ei_prior, noise_prior)
         le, ls, sd = post.map_estimate()
-    sd_ls = 1.0 / math.sqrt(2 * lik.n)  # Laplace sd of log sigma
-    samplers, states = [], []
-    for g in range(s.n_groups):
-        r = np.random.default_rng(seeding.child(seed, "emcee", g))
-        p0 = np.column_stack(
-            [le + 2.0 * sd * r.standard_normal(s.n_walkers), ls + 2.0 * sd_ls * r.standard_normal(s.n_walkers)]
-        )
-        sampler = emcee.EnsembleSampler(s.n_walkers, 2, post, vectorize=True)
-        sampler.random_state = np.random.RandomState(seeding.int_seed(seeding.child(seed, "emcee", 100 + g)) % 2**32).get_state()
-        samplers.append(sampler)
-        states.append(p0)
-    logging.getLogger("emcee").setLevel(logging.ERROR)  # its short-chain warning is our loop condition
-    steps, tau = 0, float("nan")
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=s.min_steps, desc="modal MCMC", unit="step", leave=False)
-    while True:
-        for i, sampler in enumerate(samplers):
-            states[i] = sampler.run_mcmc(states[i], s.chunk, progress=False)
-        steps += s.chunk
-        if bar is not None:
-            bar.update(s.chunk)
-        if steps < s.min_steps:
-            continue
-        taus = []
-        for sampler in samplers:
-            chain = sampler.get_chain()
-            burn = steps // 3
-            taus.append(emcee.autocorr.integrated_time(chain[burn:], quiet=True).max())
-        tau = float(np.max(taus))
-        need = int(math.ceil(s.tau_factor * tau + s.burn_factor * tau))
-        if steps >= need or steps >= s.max_steps:
-            break
-        if bar is not None:
-            bar.total = min(need, s.max_steps)
-            bar.refresh()
-    if bar is not None:
-        bar.close()
-    burn = int(math.ceil(max(s.burn_factor * tau, steps / 5)))
-    thin = max(1, int(tau / 4))
-    # one chain per independent group: its walkers' post-burn-in segments, one after another
-    chains = np.stack([_group_chain(sm.get_chain(discard=burn, thin=thin)) for sm in samplers])  # (G, draw, 2)
-    EI, sig = np.exp(chains[:, :, 0]), np.exp(chains[:, :, 1])
+    if noise_prior.kind == "vague":
+        # collapsed sampler: sigma integrated out exactly (log-uniform prior -> RSS^(-n/2)), emcee on
+        # log EI alone, then sigma^2 | EI ~ InvGamma(n/2, RSS/2) drawn exactly for every EI draw
+        marg = MarginalLogPosterior(lik, ei_prior)
+        ch = sample(marg, [le], [sd], s, seed, progress, desc="modal MCMC")
+        EI = np.exp(ch.draws[:, :, 0])
+        rss = np.concatenate([lik.rss(c) for c in np.array_split(EI.ravel(), max(1, EI.size // 256))])
+        g = np.random.default_rng(seeding.stream(seed, "noise")).gamma(lik.n / 2.0, 1.0, size=rss.size)
+        sig = np.sqrt(rss / (2.0 * g)).reshape(EI.shape)
+        sig = np.clip(sig, noise_prior.low, noise_prior.high)
+        scheme = "emcee on log EI with sigma marginalised; exact inverse-gamma sigma draws"
+    else:
+        sd_ls = 1.0 / math.sqrt(2 * lik.n)  # Laplace sd of log sigma
+        ch = sample(post, [le, ls], [sd, sd_ls], s, seed, progress, desc="modal MCMC")
+        EI, sig = np.exp(ch.draws[:, :, 0]), np.exp(ch.draws[:, :, 1])
+        scheme = "emcee on (log EI, log sigma)"
     diag = mcmc_diagnostics(EI)
     converged = bool(diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN and diag["ess_tail"] >= ESS_MIN)
     if not converged:
         warnings.warn(
             f"modal MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}", RuntimeWarning, stacklevel=2
         )
-    acc = float(np.mean([sm.acceptance_fraction.mean() for sm in samplers]))
     diag.update(
         converged=converged,
-        tau=tau,
-        steps=steps,
+        tau=ch.tau,
+        steps=ch.steps,
         walkers=s.n_walkers * s.n_groups,
-        acceptance=acc,
+        acceptance=ch.acceptance,
         n_modes=n_modes,
         truncation_error=trunc,
         noise_prior=noise_prior.describe(),
+        scheme=scheme,
     )
     info = {"map": {"EI": math.exp(le), "sigma": math.exp(ls)}}
-    return Posterior("modal_mcmc", EI, sig, diagnostics=diag, info=info, runtime_s=time.perf_counter() - t0)
+    return Posterior(
+        "modal_mcmc", EI, sig, diagnostics=diag, info=info, runtime_s=time.perf_counter() - t0,
+        predictor=ModalPredictor(cfg, EI.ravel(), n_modes),
+    )
+
+
+class ModalPredictor:
+    """Posterior predictive of the modal model: responses for EI draws (noise-free)."""
+
+    def __init__(self, cfg: Config, EI_draws: np.ndarray, n_modes: int):
+        self.cfg, self.EI, self.n_modes = cfg, np.asarray(EI_draws), n_modes
+
+    def __call__(self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None) -> np.ndarray:
+        rng = rng or np.random.default_rng(0)
+        ei = rng.choice(self.EI, size=min(n_draws, self.EI.size), replace=False)
+        x, t = np.broadcast_arrays(np.asarray(x, float).ravel(), np.asarray(t, float).ravel())
+        if quantity == "deflection":
+            w = (1.0, 0.0)
+        elif quantity in ("curvature", "moment"):
+            w = (0.0, 1.0)
+        else:
+            raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
+        m = ModalModel(self.cfg.beam, self.cfg.vehicle, x, t, *w, n_modes=max(self.n_modes, 24))
+        out = m.predict(ei)
+        return -ei[:, None] * out if quantity == "moment" else out

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import tempfile
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -72,6 +73,9 @@ class Posterior:
     diagnostics: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     runtime_s: float = 0.0
+    #: optional predictive: predictor(x, t, quantity, n_draws, rng) -> array (n_draws, P) of
+    #: 'deflection' [m], 'moment' [N m] or 'curvature' (u_xx) [1/m] (strain = -y * curvature)
+    predictor: Callable | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.method not in METHOD_KEYS:

@@ -1,0 +1,220 @@
+"""Taylor-mode (jet) derivatives of an MLP: u and its x- and t-derivatives in one forward pass.
+
+A *jet* carries, for a batch of points, the value of a field and its derivatives along two input
+directions: up to 4th order along x and up to 2nd order along t (the beam equation needs u_xxxx and u_tt,
+the boundary and strain terms u_xx, the initial condition u_t; no mixed derivative is ever needed).
+
+Propagation through the network (n-TangentProp style):
+
+* a linear layer z = h W + b is linear, so every derivative component is multiplied by W (the bias
+  only enters the value);
+* tanh acts pointwise; with y = tanh(z) and y^(k) = d^k tanh / dz^k evaluated at z,
+  y' = 1 - y^2, y'' = -2 y y', y''' = -2 (y'^2 + y y''), y'''' = -2 (3 y' y'' + y y'''),
+  Faa di Bruno's formula for derivatives along one direction gives
+
+      h1 = y' z1
+      h2 = y' z2 + y'' z1^2
+      h3 = y' z3 + 3 y'' z1 z2 + y''' z1^3
+      h4 = y' z4 + y'' (4 z1 z3 + 3 z2^2) + 6 y''' z1^2 z2 + y'''' z1^4.
+
+Everything is plain torch, so one ordinary ``backward()`` of a loss built from the jet gives the
+parameter gradients (no ``create_graph`` and no nested autograd). Components that are identically zero
+are carried as ``None`` and skipped (the first layer's input jet is mostly zeros).
+
+Shapes: tensors are (M, N, d) -- M ensemble members (1 for a single network), N points, d features.
+A component may also be (M, 1, d) when it is the same at every point (the first layer).
+
+`autograd_jet` is the reference implementation with nested ``torch.autograd.grad`` (create_graph=True),
+kept for tests and for the benchmark.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
+
+import torch
+from torch import Tensor
+
+MAX_X_ORDER = 4
+MAX_T_ORDER = 2
+
+
+class Jet(NamedTuple):
+    """A field and its derivatives along x and along t at a batch of points.
+
+    Attributes
+    ----------
+    value : Tensor (M, N, d) or (M, N)
+    x : tuple of Tensor or None, length kx <= 4; x[k-1] is the k-th derivative along x
+    t : tuple of Tensor or None, length kt <= 2; t[k-1] is the k-th derivative along t
+    """
+
+    value: Tensor
+    x: tuple[Tensor | None, ...] = ()
+    t: tuple[Tensor | None, ...] = ()
+
+    def squeeze(self, dim: int = -1) -> Jet:
+        """The same jet with `dim` squeezed from every component (e.g. the output feature axis)."""
+        sq = lambda c: None if c is None else c.squeeze(dim)  # noqa: E731
+        return Jet(sq(self.value), tuple(sq(c) for c in self.x), tuple(sq(c) for c in self.t))
+
+    def dx(self, k: int) -> Tensor:
+        """k-th derivative along x (k = 0 is the value), zeros where the component is absent."""
+        if k == 0:
+            return self.value
+        c = self.x[k - 1]
+        return torch.zeros_like(self.value) if c is None else c.expand_as(self.value)
+
+    def dt(self, k: int) -> Tensor:
+        """k-th derivative along t (k = 0 is the value), zeros where the component is absent."""
+        if k == 0:
+            return self.value
+        c = self.t[k - 1]
+        return torch.zeros_like(self.value) if c is None else c.expand_as(self.value)
+
+
+# ----------------------------------------------------------------------------- small None-aware helpers
+def _add(*terms: Tensor | None) -> Tensor | None:
+    out = None
+    for a in terms:
+        if a is not None:
+            out = a if out is None else out + a
+    return out
+
+
+def _mul(*factors: Tensor | float | None) -> Tensor | None:
+    out = None
+    for f in factors:
+        if f is None:
+            return None
+        out = f if out is None else out * f
+    return out
+
+
+# ----------------------------------------------------------------------------- layers
+def linear_jet(jet: Jet, weight: Tensor, bias: Tensor) -> Jet:
+    """z = h W + b applied to every component (bias on the value only).
+
+    Parameters
+    ----------
+    jet : Jet with components (M, N, d_in) (or (M, 1, d_in))
+    weight : Tensor (M, d_in, d_out)
+    bias : Tensor (M, 1, d_out)
+    """
+    v = jet.value
+    n = v.shape[1]
+    comps = [v, *jet.x, *jet.t]
+    full = [i for i, c in enumerate(comps) if c is not None and c.shape[1] == n]
+    out: list[Tensor | None] = [None] * len(comps)
+    # one batched matmul for every component that lives on all points
+    stacked = torch.bmm(torch.cat([comps[i] for i in full], dim=1), weight) if len(full) > 1 else None
+    for j, i in enumerate(full):
+        out[i] = stacked[:, j * n : (j + 1) * n] if stacked is not None else torch.bmm(comps[i], weight)
+    for i, c in enumerate(comps):
+        if c is not None and out[i] is None:  # broadcast components (M, 1, d_in)
+            out[i] = torch.bmm(c, weight)
+    out[0] = out[0] + bias
+    kx = len(jet.x)
+    return Jet(out[0], tuple(out[1 : 1 + kx]), tuple(out[1 + kx :]))
+
+
+def tanh_jet(jet: Jet) -> Jet:
+    """h = tanh(z) for a jet, by Faa di Bruno's formula along x (order <= 4) and t (order <= 2)."""
+    z = jet.value
+    kx, kt = len(jet.x), len(jet.t)
+    y = torch.tanh(z)
+    need = max(kx, kt)
+    d1 = 1.0 - y * y if need >= 1 else None
+    d2 = -2.0 * y * d1 if need >= 2 else None
+    d3 = -2.0 * (d1 * d1 + y * d2) if need >= 3 else None
+    d4 = -2.0 * (3.0 * d1 * d2 + y * d3) if need >= 4 else None
+    return Jet(y, _faa_di_bruno(jet.x, d1, d2, d3, d4), _faa_di_bruno(jet.t, d1, d2, d3, d4))
+
+
+def _faa_di_bruno(z: Sequence[Tensor | None], d1, d2, d3, d4) -> tuple[Tensor | None, ...]:
+    """Derivatives of y(z(s)) along one direction, orders 1..len(z) (at most 4)."""
+    k = len(z)
+    z1, z2, z3, z4 = (list(z) + [None] * 4)[:4]
+    out: list[Tensor | None] = []
+    if k >= 1:
+        out.append(_mul(d1, z1))
+    if k >= 2:
+        z1s = _mul(z1, z1)
+        out.append(_add(_mul(d1, z2), _mul(d2, z1s)))
+    if k >= 3:
+        z1z2 = _mul(z1, z2)
+        out.append(_add(_mul(d1, z3), _mul(3.0, d2, z1z2), _mul(d3, z1s, z1)))
+    if k >= 4:
+        inner = _add(_mul(4.0, z1, z3), _mul(3.0, z2, z2))
+        out.append(_add(_mul(d1, z4), _mul(d2, inner), _mul(6.0, d3, z1s, z2), _mul(d4, z1s, z1s)))
+    return tuple(out)
+
+
+def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet) -> Jet:
+    """Propagate an input jet through tanh hidden layers and a linear output layer.
+
+    Parameters
+    ----------
+    weights : Tensors (M, d_in, d_out), one per layer (the last is the output layer)
+    biases : Tensors (M, 1, d_out)
+    jet : Jet of the network inputs, components (M, N, d_in) or (M, 1, d_in)
+
+    Returns
+    -------
+    Jet of the network outputs, components (M, N, d_out).
+    """
+    h = jet
+    last = len(weights) - 1
+    for i, (w, b) in enumerate(zip(weights, biases, strict=True)):
+        h = linear_jet(h, w, b)
+        if i < last:
+            h = tanh_jet(h)
+    return h
+
+
+def product_jet(a: Jet, b: Jet) -> Jet:
+    """Leibniz rule along each direction: the jet of a * b (orders of `a`)."""
+    binom = ((1,), (1, 1), (1, 2, 1), (1, 3, 3, 1), (1, 4, 6, 4, 1))
+
+    def comp(j: Jet, axis: str, k: int) -> Tensor | None:
+        if k == 0:
+            return j.value
+        seq = j.x if axis == "x" else j.t
+        return seq[k - 1] if k <= len(seq) else None
+
+    def direction(axis: str, order: int) -> tuple[Tensor | None, ...]:
+        return tuple(
+            _add(*(_mul(float(binom[n][k]), comp(a, axis, k), comp(b, axis, n - k)) for k in range(n + 1)))
+            for n in range(1, order + 1)
+        )
+
+    return Jet(a.value * b.value, direction("x", len(a.x)), direction("t", len(a.t)))
+
+
+# ----------------------------------------------------------------------------- reference
+def autograd_jet(fn: Callable[[Tensor, Tensor], Tensor], x: Tensor, t: Tensor, kx: int, kt: int) -> Jet:
+    """Reference derivatives by nested ``torch.autograd.grad`` (create_graph=True).
+
+    Parameters
+    ----------
+    fn : maps x (M, N), t (M, N) to the field (M, N); every output point depends on its own input only
+    x, t : Tensor (M, N), the coordinates along which derivatives are taken
+    kx, kt : orders wanted along x (<= 4) and t (<= 2)
+
+    Returns
+    -------
+    Jet with components (M, N), differentiable with respect to the parameters of `fn`.
+    """
+    x = x.detach().requires_grad_(True)
+    t = t.detach().requires_grad_(True)
+    u = fn(x, t)
+
+    def chain(var: Tensor, order: int) -> tuple[Tensor, ...]:
+        out, g = [], u
+        for _ in range(order):
+            g = torch.autograd.grad(g.sum(), var, create_graph=True)[0]
+            out.append(g)
+        return tuple(out)
+
+    return Jet(u, chain(x, kx), chain(t, kt))
