@@ -134,6 +134,7 @@ def _config(args) -> Config:
         raise InputError("--noise-prior", args.noise_prior, "vague or snr")
     if getattr(args, "executor", "local") not in ("local", "ray"):
         raise InputError("--executor", args.executor, "local or ray")
+    resolve_device(getattr(args, "device", "auto"))
     return resolve(args.case, args.config)
 
 

@@ -111,8 +111,11 @@ class FEBeam:
         return F[self.free]
 
     def solve(self, vehicle: Vehicle, t_end: float) -> FEResponse:
-        """Integrate from rest over [0, t_end] [s] with Newmark average acceleration."""
-        n = self.settings.n_steps
+        """Integrate a crossing from rest over [0, t_end] [s] with Newmark average acceleration."""
+        return self.solve_forced(lambda t: self.load_vector(vehicle, t), t_end, self.settings.n_steps)
+
+    def solve_forced(self, force, t_end: float, n: int) -> FEResponse:
+        """Integrate from rest under force(t) -> free-dof load vector, n Newmark steps over [0, t_end]."""
         dt = t_end / n
         K, M, C = self.K, self.M, self.C
         a0, a1 = 4.0 / dt**2, 2.0 / dt  # 1/(beta dt^2), gamma/(beta dt)
@@ -121,10 +124,10 @@ class FEBeam:
         nf = K.shape[0]
         U = np.zeros((n + 1, nf))
         V = np.zeros((n + 1, nf))
-        F0 = self.load_vector(vehicle, 0.0)
+        F0 = force(0.0)
         A = sla.solve(M, F0 - C @ V[0] - K @ U[0], assume_a="pos")
         for i in range(n):
-            F = self.load_vector(vehicle, (i + 1) * dt)
+            F = force((i + 1) * dt)
             rhs = F + M @ (a0 * U[i] + (4.0 / dt) * V[i] + A) + C @ (a1 * U[i] + V[i])
             U[i + 1] = sla.cho_solve(fac, rhs)
             A_new = a0 * (U[i + 1] - U[i]) - (4.0 / dt) * V[i] - A

@@ -30,6 +30,8 @@ from .taylor import Jet, autograd_jet, mlp_jet, product_jet
 
 #: time constant of the hard initial-condition factor g(tau) = 1 - exp(-(tau/c)^2) (non-dimensional)
 HARD_IC_TAU = 0.05
+#: derivative engines of `PINN.jet`
+ENGINES = ("taylor", "taylor-unfused", "autograd")
 
 
 class PINN(nn.Module):
@@ -127,17 +129,21 @@ class PINN(nn.Module):
         ----------
         xi, tau : Tensor (M, N), non-dimensional position and time in [0, 1]
         kx, kt : derivative orders wanted (kx <= 4, kt <= 2)
-        engine : 'taylor' (one forward pass of jets) or 'autograd' (nested autograd, the reference)
+        engine : 'taylor' (one forward pass of jets, fused layers with a hand-written backward),
+            'taylor-unfused' (the same formulas, autograd through every operation) or 'autograd'
+            (nested torch.autograd.grad, the reference)
 
         Returns
         -------
         Jet with components (M, N); absent (identically zero) components are None.
         """
         if engine == "autograd":
-            return autograd_jet(self.forward, xi, tau, kx, kt)
-        if engine != "taylor":
-            raise ValueError(f"engine must be 'taylor' or 'autograd', got {engine!r}")
-        out = mlp_jet(list(self.weights), list(self.biases), self._input_jet(xi, tau, kx, kt)).squeeze(-1)
+            return autograd_jet(self._plain, xi, tau, kx, kt)
+        if engine not in ENGINES:
+            raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        fused = engine == "taylor"
+        inp = self._input_jet(xi, tau, kx, kt)
+        out = mlp_jet(list(self.weights), list(self.biases), inp, fused=fused).squeeze(-1)
         env = self._envelope(xi, tau, kx, kt)
         if env is not None:
             out = product_jet(env, Jet(out.value, out.x + (None,) * (kx - len(out.x)), out.t))
@@ -146,6 +152,10 @@ class PINN(nn.Module):
     def forward(self, xi: Tensor, tau: Tensor) -> Tensor:
         """w (M, N) at non-dimensional points xi, tau (M, N)."""
         return self.jet(xi, tau, 0, 0).value
+
+    def _plain(self, xi: Tensor, tau: Tensor) -> Tensor:
+        """w (M, N) through ordinary differentiable ops only (differentiable any number of times)."""
+        return self.jet(xi, tau, 0, 0, engine="taylor-unfused").value
 
     @property
     def EI_ratio(self) -> Tensor:

@@ -30,6 +30,7 @@ kept for tests and for the benchmark.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
@@ -108,9 +109,13 @@ def linear_jet(jet: Jet, weight: Tensor, bias: Tensor) -> Jet:
     full = [i for i, c in enumerate(comps) if c is not None and c.shape[1] == n]
     out: list[Tensor | None] = [None] * len(comps)
     # one batched matmul for every component that lives on all points
-    stacked = torch.bmm(torch.cat([comps[i] for i in full], dim=1), weight) if len(full) > 1 else None
+    # (torch.split, not slicing: its backward concatenates instead of zero-filling a buffer per slice)
+    if len(full) > 1:
+        parts = torch.split(torch.bmm(torch.cat([comps[i] for i in full], dim=1), weight), n, dim=1)
+    else:
+        parts = [torch.bmm(comps[i], weight) for i in full]
     for j, i in enumerate(full):
-        out[i] = stacked[:, j * n : (j + 1) * n] if stacked is not None else torch.bmm(comps[i], weight)
+        out[i] = parts[j]
     for i, c in enumerate(comps):
         if c is not None and out[i] is None:  # broadcast components (M, 1, d_in)
             out[i] = torch.bmm(c, weight)
@@ -151,7 +156,94 @@ def _faa_di_bruno(z: Sequence[Tensor | None], d1, d2, d3, d4) -> tuple[Tensor | 
     return tuple(out)
 
 
-def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet) -> Jet:
+class _FusedTanhJet(torch.autograd.Function):
+    """tanh of a stacked jet z (M, K, N, d) plus a bias on the value, with a hand-written backward.
+
+    Components along axis 1: 0 the value, 1..kx the x-derivatives, kx+1..kx+kt the t-derivatives.
+    The backward needs only the output jet y: with D(s) = tanh'(z(s)) = 1 - y(s)^2, whose derivatives
+    D_n = -sum_k C(n, k) y_k y_{n-k} follow from y, the sensitivities are
+
+        d y_n / d z_0 = D_n,    d y_n / d z_k = C(n, k) D_{n-k}   (k >= 1, same direction),
+
+    because shifting z_k shifts z(s) by s^k / k!. This saves one tensor per layer instead of the dozens
+    that autograd keeps for Faa di Bruno's formula, and needs about as many operations as the forward.
+    """
+
+    @staticmethod
+    def forward(ctx, z: Tensor, bias: Tensor, kx: int, kt: int) -> Tensor:
+        h = torch.empty_like(z)
+        y = torch.tanh(z[:, 0] + bias, out=h[:, 0])
+        d1 = 1.0 - y * y
+        need = max(kx, kt)
+        d2 = -2.0 * y * d1 if need >= 2 else None
+        d3 = -2.0 * (d1 * d1 + y * d2) if need >= 3 else None
+        d4 = -2.0 * (3.0 * d1 * d2 + y * d3) if need >= 4 else None
+        for off, k in ((1, kx), (1 + kx, kt)):
+            if k == 0:
+                continue
+            z1 = z[:, off]
+            torch.mul(d1, z1, out=h[:, off])
+            if k >= 2:
+                z2 = z[:, off + 1]
+                z1s = z1 * z1
+                torch.addcmul(d1 * z2, d2, z1s, out=h[:, off + 1])
+            if k >= 3:
+                z3 = z[:, off + 2]
+                z1z2 = z1 * z2
+                torch.addcmul(torch.addcmul(d1 * z3, d2, z1z2, value=3.0), d3, z1s * z1, out=h[:, off + 2])
+            if k >= 4:
+                z4 = z[:, off + 3]
+                inner = torch.addcmul(4.0 * z1 * z3, z2, z2, value=3.0)
+                acc = torch.addcmul(d1 * z4, d2, inner)
+                acc = torch.addcmul(acc, d3, z1s * z2, value=6.0)
+                torch.addcmul(acc, d4, z1s * z1s, out=h[:, off + 3])
+        ctx.kx, ctx.kt = kx, kt
+        ctx.save_for_backward(h)
+        return h
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx, g: Tensor):
+        (h,) = ctx.saved_tensors
+        kx, kt = ctx.kx, ctx.kt
+        gz = torch.empty_like(h)
+        y0 = h[:, 0]
+        D0 = 1.0 - y0 * y0
+        g0 = g[:, 0] * D0
+        for off, k in ((1, kx), (1 + kx, kt)):
+            if k == 0:
+                continue
+            y = [y0] + [h[:, off + i] for i in range(k)]
+            gn = [None] + [g[:, off + i] for i in range(k)]
+            # D_n for n = 1..k-... : jet of 1 - y^2 along this direction
+            D = [D0]
+            if k >= 1:
+                D.append(-2.0 * y0 * y[1])
+            if k >= 2:
+                D.append(-2.0 * torch.addcmul(y0 * y[2], y[1], y[1]))
+            if k >= 3:
+                D.append(-2.0 * torch.addcmul(y0 * y[3], y[1], y[2], value=3.0))
+            if k >= 4:
+                acc = torch.addcmul(y0 * y[4], y[1], y[3], value=4.0)
+                D.append(-2.0 * torch.addcmul(acc, y[2], y[2], value=3.0))
+            for n in range(1, k + 1):
+                g0 = torch.addcmul(g0, gn[n], D[n])
+            for j in range(1, k + 1):  # gradient wrt z_j: sum_{n >= j} C(n, j) g_n D_{n-j}
+                acc = gn[j] * D0
+                for n in range(j + 1, k + 1):
+                    acc = torch.addcmul(acc, gn[n], D[n - j], value=float(math.comb(n, j)))
+                gz[:, off + j - 1].copy_(acc)
+        gz[:, 0].copy_(g0)
+        return gz, g0.sum(1, keepdim=True), None, None
+
+
+def _stack(jet: Jet) -> Tensor:
+    """(M, K, N, d) from a jet whose components are all present."""
+    v = jet.value
+    return torch.stack([c.expand_as(v) for c in (v, *jet.x, *jet.t)], dim=1)
+
+
+def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet, *, fused: bool = True) -> Jet:
     """Propagate an input jet through tanh hidden layers and a linear output layer.
 
     Parameters
@@ -159,18 +251,30 @@ def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet) -> Je
     weights : Tensors (M, d_in, d_out), one per layer (the last is the output layer)
     biases : Tensors (M, 1, d_out)
     jet : Jet of the network inputs, components (M, N, d_in) or (M, 1, d_in)
+    fused : after the first layer, carry the jet as one stacked tensor (M, K, N, d) through one matmul
+        per layer and `_FusedTanhJet` (hand-written backward); False uses the component-wise formulas
+        with autograd throughout (same numbers, slower; kept as a second implementation for tests)
 
     Returns
     -------
     Jet of the network outputs, components (M, N, d_out).
     """
-    h = jet
     last = len(weights) - 1
-    for i, (w, b) in enumerate(zip(weights, biases, strict=True)):
-        h = linear_jet(h, w, b)
-        if i < last:
-            h = tanh_jet(h)
-    return h
+    h = tanh_jet(linear_jet(jet, weights[0], biases[0])) if last > 0 else linear_jet(jet, weights[0], biases[0])
+    if last == 0:
+        return h
+    if not fused or any(c is None for c in (*h.x, *h.t)):
+        for w, b in zip(weights[1:last], biases[1:last], strict=True):
+            h = tanh_jet(linear_jet(h, w, b))
+        return linear_jet(h, weights[last], biases[last])
+    kx, kt = len(h.x), len(h.t)
+    H = _stack(h)
+    M, K, N, _ = H.shape
+    for w, b in zip(weights[1:last], biases[1:last], strict=True):
+        Z = torch.bmm(H.reshape(M, K * N, -1), w).view(M, K, N, -1)
+        H = _FusedTanhJet.apply(Z, b, kx, kt)
+    out = torch.bmm(H.reshape(M, K * N, -1), weights[last]).view(M, K, N, -1).unbind(1)
+    return Jet(out[0] + biases[last], tuple(out[1 : 1 + kx]), tuple(out[1 + kx :]))
 
 
 def product_jet(a: Jet, b: Jet) -> Jet:

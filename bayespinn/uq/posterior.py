@@ -110,7 +110,9 @@ class Posterior:
         for k, v in {**self.diagnostics, **self.info}.items():
             if isinstance(v, int | float | str | bool | np.floating | np.integer):
                 attrs[f"bayespinn_{k}"] = v if not isinstance(v, bool) else int(v)
-        return az.from_dict(posterior={"EI": self.EI, "sigma": self.sigma}, attrs=attrs)
+        idata = az.from_dict(posterior={"EI": self.EI, "sigma": self.sigma})
+        idata.posterior.attrs.update(attrs)
+        return idata
 
     def to_netcdf(self, path: str | Path) -> Path:
         """Write the InferenceData atomically (temporary file, then rename)."""

@@ -1,0 +1,201 @@
+"""What a PINN fit needs to know: the girder, the axles, the data, the scales and the objective's extras.
+
+`Problem` is the physical description (SI units, numpy); `Problem.tensors` turns it into the
+non-dimensional torch tensors the loss terms use.
+
+Scales (see `network`): L span, T duration, P the largest total load on the span at once (the sum of the
+axle loads whose offsets fit within L; for both case studies all axles), U = P L^3 / (48 EI_ref) the
+midspan static deflection of P at EI_ref, q = P / L the load-intensity scale of the PDE residual.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from ..config import Beam, Config, Vehicle
+from ..data.measurements import Measurements
+
+#: default Gaussian delta width as a fraction of the span (beta = 0.025 L)
+DEFAULT_BETA_REL = 0.025
+
+
+@dataclass(frozen=True)
+class Scales:
+    """Non-dimensionalisation constants (SI units).
+
+    L [m], T [s], P [N], EI_ref [N m^2], U [m] = P L^3 / (48 EI_ref), mu [kg/m].
+    """
+
+    L: float
+    T: float
+    P: float
+    EI_ref: float
+    mu: float
+
+    @property
+    def U(self) -> float:
+        """Deflection scale [m]."""
+        return self.P * self.L**3 / (48.0 * self.EI_ref)
+
+    @property
+    def q(self) -> float:
+        """Load-intensity scale P / L [N/m] dividing the PDE residual."""
+        return self.P / self.L
+
+    @property
+    def inertia(self) -> float:
+        """mu U / (T^2 q): coefficient of w_tautau in the non-dimensional PDE residual [-]."""
+        return self.mu * self.U / (self.T**2 * self.q)
+
+    @property
+    def stiffness(self) -> float:
+        """EI_ref U / (L^4 q) = 1/48: coefficient of (EI/EI_ref) w_xixixixi in the residual [-]."""
+        return self.EI_ref * self.U / (self.L**4 * self.q)
+
+
+@dataclass(frozen=True)
+class Problem:
+    """An inverse problem: find EI from measurements of a girder under moving axles.
+
+    Parameters
+    ----------
+    beam : the girder (beam.EI is *not* used: it is the unknown)
+    vehicle : the axles and speed
+    data : Measurements, or a tuple of M Measurements sharing x, t, kind and y (different values, e.g.
+        perturbed copies for the M members of an ensemble trained together)
+    EI_ref : float, reference rigidity [N m^2] (the prior median); the network starts at EI_ref
+    beta : float, Gaussian delta width [m] (paper Eq. 5); default 0.025 L
+    noise_sd : float or None, measurement noise sd (units of the values). When given, the objective is
+        *posterior-scaled*: sum over data of (r / noise_sd)^2 / 2, physics penalties scaled by the same
+        factor, plus the prior term (see `losses.Objective`)
+    anchor : None or (loc, sd): a Gaussian term 0.5 ((log EI - loc) / sd)^2 on log EI [log N m^2];
+        loc may be a sequence (M,), one anchor per member
+    duration : float or None, T [s]; default max(vehicle duration, last data time)
+    """
+
+    beam: Beam
+    vehicle: Vehicle
+    data: Measurements | tuple[Measurements, ...]
+    EI_ref: float = 1.0e9
+    beta: float | None = None
+    noise_sd: float | None = None
+    anchor: tuple[float | Sequence[float], float] | None = None
+    duration: float | None = None
+
+    def __post_init__(self) -> None:
+        data = self.data if isinstance(self.data, tuple | list) else (self.data,)
+        first = data[0]
+        for d in data[1:]:
+            if len(d) != len(first) or not (np.array_equal(d.x, first.x) and np.array_equal(d.t, first.t)):
+                raise ValueError("all Measurements of a Problem must share the same x and t")
+        object.__setattr__(self, "data", tuple(data) if len(data) > 1 else first)
+        if self.beta is None:
+            object.__setattr__(self, "beta", DEFAULT_BETA_REL * self.beam.length)
+        if not (self.beta > 0 and math.isfinite(self.beta)):
+            raise ValueError(f"beta must be a finite width > 0 m, got {self.beta}")
+        if self.noise_sd is not None and not self.noise_sd > 0:
+            raise ValueError(f"noise_sd must be > 0, got {self.noise_sd}")
+        if self.duration is None:
+            T = max(self.vehicle.duration(self.beam.length), float(first.t.max()))
+            object.__setattr__(self, "duration", T)
+
+    @classmethod
+    def from_config(cls, cfg: Config, data: Measurements | Sequence[Measurements], **kw) -> Problem:
+        """Problem for a configuration: its beam and vehicle, EI_ref = the prior median."""
+        kw.setdefault("EI_ref", cfg.prior.EI_median)
+        d = tuple(data) if isinstance(data, list | tuple) else data
+        return cls(cfg.beam, cfg.vehicle, d, **kw)
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def datasets(self) -> tuple[Measurements, ...]:
+        """The data as a tuple (length M_data: 1, or one per member)."""
+        return self.data if isinstance(self.data, tuple) else (self.data,)
+
+    @property
+    def scales(self) -> Scales:
+        L = self.beam.length
+        offs, loads = self.vehicle.offsets, self.vehicle.loads
+        # largest total load on the span at once: axles within a window of length L behind each axle
+        P = max(float(loads[(offs >= o) & (offs <= o + L)].sum()) for o in offs)
+        return Scales(L, float(self.duration), P, float(self.EI_ref), self.beam.mass_per_length)
+
+    def row_scales(self) -> np.ndarray:
+        """Per-observation value scale s_i (P,): U for deflection, 12 |y| U / L^2 for strain
+        (the peak deflection and strain of P at midspan at EI_ref)."""
+        sc = self.scales
+        a_u, a_xx = self.datasets[0].weights
+        return np.abs(a_u) * sc.U + np.abs(a_xx) * 12.0 * sc.U / sc.L**2
+
+    def tensors(self, members: int, device: str | torch.device = "cpu", dtype=torch.float32) -> ProblemTensors:
+        """Non-dimensional torch tensors for M members (data broadcast when shared)."""
+        sc = self.scales
+        ds = self.datasets
+        if len(ds) not in (1, members):
+            raise ValueError(f"Problem holds {len(ds)} datasets, cannot train {members} members")
+        s = self.row_scales()
+        a_u, a_xx = ds[0].weights
+        vals = np.stack([d.value for d in ds]) / s[None, :]
+        if len(ds) == 1:
+            vals = np.repeat(vals, members, axis=0)
+        t = lambda a: torch.as_tensor(np.array(a, float), dtype=dtype, device=device)  # noqa: E731
+        xi = np.broadcast_to(ds[0].x / sc.L, (members, len(s)))
+        tau = np.broadcast_to(ds[0].t / sc.T, (members, len(s)))
+        noise = None
+        if self.noise_sd is not None:
+            noise = 0.5 * float(np.sum((s / self.noise_sd) ** 2))
+        anchor = None
+        if self.anchor is not None:
+            loc, sd = self.anchor
+            loc = np.broadcast_to(np.asarray(loc, float), (members,)) - math.log(sc.EI_ref)
+            anchor = (t(loc), float(sd))
+        return ProblemTensors(
+            xi=t(xi),
+            tau=t(tau),
+            a_u=t(a_u * sc.U / s),
+            a_xx=t(a_xx * sc.U / sc.L**2 / s),
+            value=t(vals),
+            needs_curvature=bool(np.any(a_xx != 0)),
+            needs_value=bool(np.any(a_u != 0)),
+            data_scale=noise,
+            anchor=anchor,
+            loads=t(self.vehicle.loads / sc.P),
+            delays=t(self.vehicle.delays / sc.T),
+            speed=self.vehicle.speed * sc.T / sc.L,
+            beta=self.beta / sc.L,
+            stiffness=sc.stiffness,
+            inertia=sc.inertia,
+        )
+
+
+@dataclass(frozen=True)
+class ProblemTensors:
+    """Non-dimensional data and constants on the training device.
+
+    xi, tau : (M, P) data coordinates; a_u, a_xx : (P,) weights so that the scaled observation is
+    a_u w + a_xx w_xixi; value : (M, P) scaled observed values; data_scale : None, or the factor
+    0.5 sum_i (s_i / sigma)^2 that turns the mean squared scaled residual into the Gaussian negative log
+    likelihood; anchor : None or ((M,) loc of log(EI/EI_ref), sd); loads (J,) axle loads / P;
+    delays (J,) entry times / T; speed v T / L; beta / L; stiffness = 1/48 and inertia coefficients.
+    """
+
+    xi: torch.Tensor
+    tau: torch.Tensor
+    a_u: torch.Tensor
+    a_xx: torch.Tensor
+    value: torch.Tensor
+    needs_curvature: bool
+    needs_value: bool
+    data_scale: float | None
+    anchor: tuple[torch.Tensor, float] | None
+    loads: torch.Tensor
+    delays: torch.Tensor
+    speed: float
+    beta: float
+    stiffness: float
+    inertia: float

@@ -1,0 +1,154 @@
+"""Training settings: one frozen, self-validating dataclass and three named profiles.
+
+* ``smoke``: a few seconds, for tests (small network, few points, few steps); not accurate.
+* ``fast``: the default, minutes on a 2-core CPU (see `PROFILES` for what it changes from the paper).
+* ``paper``: the paper's Table 1: 5 x 64 tanh, 2500 PDE / 2000 BC / 1000 IC points, Adam for 60 000
+  epochs with the quadratic schedule phi_i = (1 - (i/N)^2) phi_0 + (i/N)^2 phi_1, phi_0 = 1e-2,
+  phi_1 = 0.7 phi_0, adaptive loss weights, no L-BFGS, no resampling (meant for a GPU).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+
+SCHEDULES = ("paper", "cosine", "exp", "constant")
+PROFILE_NAMES = ("smoke", "fast", "paper")
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """How one PINN fit trains.
+
+    Attributes
+    ----------
+    profile : name of the profile these settings came from (informational)
+    width, depth : hidden-layer width and number of hidden layers
+    epochs : Adam steps
+    lr : phi_0, initial learning rate
+    lr_final : learning rate at the last Adam step (the paper: 0.7 lr)
+    schedule : 'paper' (quadratic in i/N), 'cosine', 'exp' (geometric) or 'constant'
+    lr_ei_factor : learning rate of log EI relative to the network's
+    n_pde, n_bc, n_ic : collocation points per member (PDE residual, supports, initial time)
+    load_fraction : share of the PDE points drawn around the axle paths (0: uniform, as the paper)
+    resample_every : draw fresh collocation points every this many Adam steps (0: never)
+    lbfgs_iters : L-BFGS iterations after Adam (0: none), on a fixed set of points
+    lbfgs_chunk : L-BFGS iterations between checkpoints / divergence checks
+    weighting : 'fixed' or 'adaptive' (paper Table 1: alpha_k = L_k / min L, detached)
+    w_pde, w_ic, w_bc, w_data : fixed weights of the four terms
+    beta_rel : Gaussian delta width beta / L (used when the Problem does not set beta)
+    correct_beta : divide the fitted EI by `beta.beta_bias_factor` (the O(beta^2) bias of the Gaussian
+        load against point-load data, from the modal solution)
+    hard_bc, hard_ic : exact boundary / initial conditions by construction (off: the paper's soft terms)
+    engine : 'taylor' (default), 'taylor-unfused' or 'autograd' (nested autograd, slow reference)
+    compile : torch.compile the loss ('auto': on for CUDA, off for CPU; falls back to eager on failure)
+    dtype : 'float32' (the paper's FP32) or 'float64'
+    checkpoint_every : steps between checkpoints when a checkpoint file is given
+    log_every : steps between history records
+    max_log_ei : divergence guard: |log(EI / EI_ref)| beyond this counts as diverged
+    """
+
+    profile: str = "fast"
+    width: int = 64
+    depth: int = 5
+    epochs: int = 4000
+    lr: float = 5e-3
+    lr_final: float = 2e-4
+    schedule: str = "cosine"
+    lr_ei_factor: float = 1.0
+    n_pde: int = 2000
+    n_bc: int = 400
+    n_ic: int = 400
+    load_fraction: float = 0.3
+    resample_every: int = 100
+    lbfgs_iters: int = 500
+    lbfgs_chunk: int = 50
+    weighting: str = "fixed"
+    w_pde: float = 1.0
+    w_ic: float = 1.0
+    w_bc: float = 1.0
+    w_data: float = 1.0
+    beta_rel: float = 0.025
+    correct_beta: bool = True
+    hard_bc: bool = False
+    hard_ic: bool = False
+    engine: str = "taylor"
+    compile: str | bool = "auto"
+    dtype: str = "float32"
+    checkpoint_every: int = 500
+    log_every: int = 50
+    max_log_ei: float = 3.0
+
+    def __post_init__(self) -> None:
+        pos_int = ("width", "depth", "n_pde", "n_bc", "n_ic", "lbfgs_chunk", "checkpoint_every", "log_every")
+        for name in pos_int:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 1")
+        for name in ("epochs", "resample_every", "lbfgs_iters"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 0")
+        for name in ("lr", "lr_final", "lr_ei_factor", "beta_rel", "max_log_ei"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
+                raise ValueError(f"TrainSettings.{name}: got {v!r}, expected a finite number > 0")
+        for name in ("w_pde", "w_ic", "w_bc", "w_data"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"TrainSettings.{name}: got {v!r}, expected a finite number >= 0")
+        if not 0.0 <= self.load_fraction < 1.0:
+            raise ValueError(f"TrainSettings.load_fraction: got {self.load_fraction!r}, expected a number in [0, 1)")
+        choices = {
+            "schedule": SCHEDULES,
+            "weighting": ("fixed", "adaptive"),
+            "engine": ("taylor", "taylor-unfused", "autograd"),
+            "dtype": ("float32", "float64"),
+            "compile": ("auto", True, False),
+        }
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"TrainSettings.{name}: got {getattr(self, name)!r}, expected one of {allowed}")
+        if self.n_bc < 2:
+            raise ValueError(f"TrainSettings.n_bc: got {self.n_bc}, expected >= 2 (both supports)")
+
+    @classmethod
+    def for_profile(cls, name: str = "fast", **overrides) -> TrainSettings:
+        """The named profile ('smoke', 'fast', 'paper'), with optional field overrides."""
+        if name not in PROFILES:
+            raise ValueError(f"unknown training profile {name!r}; expected one of {', '.join(PROFILE_NAMES)}")
+        return replace(PROFILES[name], **overrides)
+
+    def learning_rate(self, i: int) -> float:
+        """Adam learning rate at step i (0 <= i < epochs)."""
+        N = max(self.epochs, 1)
+        r = min(i / N, 1.0)
+        if self.schedule == "paper":
+            return (1.0 - r * r) * self.lr + r * r * self.lr_final
+        if self.schedule == "cosine":
+            return self.lr_final + 0.5 * (self.lr - self.lr_final) * (1.0 + math.cos(math.pi * r))
+        if self.schedule == "exp":
+            return self.lr * (self.lr_final / self.lr) ** r
+        return self.lr
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TrainSettings:
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+PROFILES: dict[str, TrainSettings] = {
+    "smoke": TrainSettings(
+        profile="smoke", width=16, depth=2, epochs=60, lr=1e-2, lr_final=1e-3, n_pde=200, n_bc=40,
+        n_ic=40, resample_every=20, lbfgs_iters=20, lbfgs_chunk=10, checkpoint_every=20, log_every=10,
+    ),
+    "fast": TrainSettings(),
+    "paper": TrainSettings(
+        profile="paper", width=64, depth=5, epochs=60_000, lr=1e-2, lr_final=0.7e-2, schedule="paper",
+        n_pde=2500, n_bc=2000, n_ic=1000, load_fraction=0.0, resample_every=0, lbfgs_iters=0,
+        weighting="adaptive", checkpoint_every=2000, log_every=200,
+    ),
+}

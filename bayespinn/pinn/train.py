@@ -1,0 +1,420 @@
+"""The one PINN training loop: every method that trains a PINN calls `fit`.
+
+Adam (with the chosen learning-rate schedule and collocation resampling), then an optional L-BFGS polish
+on a fixed set of points. M members can train together as one batched network (`members=M`); their
+objectives are independent and summed. Deterministic on the CPU for a given seed and thread count:
+each member draws its initial weights and collocation points from its own torch.Generator, made from
+the seed (a numpy SeedSequence or an int); nothing global is seeded.
+
+Checkpointing: with ``checkpoint=path`` the state (weights, optimiser, generators, points, history) is
+written atomically every ``settings.checkpoint_every`` steps and at the end; a later call with the same
+path and ``resume=True`` continues from it and ends with the same numbers as an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..errors import TrainingDiverged
+from .beta import beta_bias_factor
+from .losses import TERMS, Objective
+from .network import PINN
+from .problem import Problem
+from .sampling import Collocation, sample_collocation
+from .settings import TrainSettings
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_SCHEMA = "bayespinn.pinn.checkpoint/1"
+
+
+@dataclass
+class FitResult:
+    """The outcome of `fit`.
+
+    Attributes
+    ----------
+    EI : float (single network) or array (M,) (``members=M``): estimated flexural rigidity [N m^2],
+        divided by the Gaussian-delta bias factor when ``settings.correct_beta``
+    EI_raw : same shape, exp(log_ei) EI_ref before the beta correction [N m^2]
+    beta_factor : float, the bias factor used (1.0 when not corrected)
+    losses : dict term -> float or array (M,): final pde, ic, bc, data (+ prior) terms and 'total'
+    history : dict of arrays: 'step' (R,), 'lr' (R,), each term and 'total' (R, M), 'EI_raw' (R, M)
+    state : dict, the trained PINN's state_dict (CPU tensors); `model()` rebuilds the network
+    runtime_s : wall time of this call [s] (plus that of the interrupted run when resumed)
+    steps : Adam steps + L-BFGS iterations done
+    settings : TrainSettings
+    members : M, or None for a single network
+    problem : Problem the fit solved
+    """
+
+    EI: float | np.ndarray
+    EI_raw: float | np.ndarray
+    beta_factor: float
+    losses: dict[str, Any]
+    history: dict[str, np.ndarray]
+    state: dict
+    runtime_s: float
+    steps: int
+    settings: TrainSettings
+    members: int | None
+    problem: Problem = field(repr=False)
+
+    def model(self, device: str | torch.device = "cpu") -> PINN:
+        """The trained network (all members), in eval mode on `device`."""
+        s = self.settings
+        net = PINN(s.width, s.depth, members=self.members or 1, hard_bc=s.hard_bc, hard_ic=s.hard_ic,
+                   dtype=_dtype(s.dtype))
+        net.load_state_dict(self.state)
+        return net.to(device).eval()
+
+    def predict(self, x: np.ndarray, t: np.ndarray, kx: int = 0) -> np.ndarray:
+        """Deflection u [m] (kx = 0) or curvature u_xx [1/m] (kx = 2) at x [m], t [s] (P,) -> (M, P) or (P,)."""
+        sc = self.problem.scales
+        net = self.model()
+        M = self.members or 1
+        xi = torch.as_tensor(np.broadcast_to(np.asarray(x, float) / sc.L, (M, np.size(x))), dtype=_dtype(self.settings.dtype))
+        tau = torch.as_tensor(np.broadcast_to(np.asarray(t, float) / sc.T, (M, np.size(t))), dtype=xi.dtype)
+        with torch.no_grad():
+            j = net.jet(xi, tau, kx, 0)
+        out = j.dx(kx).double().numpy() * sc.U / sc.L**kx
+        return out if self.members else out[0]
+
+
+def _dtype(name: str) -> torch.dtype:
+    return torch.float64 if name == "float64" else torch.float32
+
+
+def _member_seeds(seed: int | np.random.SeedSequence, members: int) -> list[tuple[int, int]]:
+    """(init seed, collocation seed) for each member: member m's streams depend on (seed, m) only."""
+    root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(int(seed))
+    out = []
+    for m in range(members):
+        key = tuple(root.spawn_key) + (m,)
+        s = [np.random.SeedSequence(root.entropy, spawn_key=key + (k,)).generate_state(2, np.uint64) for k in (0, 1)]
+        out.append(tuple(int(a[0] >> np.uint64(1)) for a in s))
+    return out
+
+
+def _resolve_device(device: str | torch.device) -> torch.device:
+    if str(device) == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(device)
+
+
+def _want_compile(settings: TrainSettings, device: torch.device) -> bool:
+    if settings.compile == "auto":
+        return device.type == "cuda"
+    return bool(settings.compile) and settings.engine != "autograd"
+
+
+class _Trainer:
+    """State of one fit: network, points, optimisers. `fit` drives it."""
+
+    def __init__(self, problem: Problem, s: TrainSettings, seed, members: int, device: torch.device):
+        self.problem, self.s, self.M, self.device = problem, s, members, device
+        self.dtype = _dtype(s.dtype)
+        seeds = _member_seeds(seed, members)
+        init_gens = [torch.Generator().manual_seed(a) for a, _ in seeds]
+        self.col_gens = [torch.Generator().manual_seed(b) for _, b in seeds]
+        self.model = PINN(s.width, s.depth, members=members, generators=init_gens, hard_bc=s.hard_bc,
+                          hard_ic=s.hard_ic, dtype=self.dtype).to(device)
+        self.pt = problem.tensors(members, device, self.dtype)
+        self.compiled = _want_compile(s, device)
+        engine = "taylor-unfused" if self.compiled and s.engine == "taylor" else s.engine
+        self.objective = Objective(s.weighting, s.w_pde, s.w_ic, s.w_bc, s.w_data, engine=engine)
+        self._loss = self._eval
+        if self.compiled:
+            try:
+                self._loss = torch.compile(self._eval, dynamic=False)
+            except Exception as exc:  # pragma: no cover - depends on the installation
+                log.warning("torch.compile unavailable (%s); training eagerly", exc)
+                self.compiled = False
+        net_params = [p for n, p in self.model.named_parameters() if n != "log_ei"]
+        self.adam = torch.optim.Adam(
+            [{"params": net_params}, {"params": [self.model.log_ei], "lr_factor": s.lr_ei_factor}], lr=s.lr
+        )
+        self.lbfgs: torch.optim.LBFGS | None = None
+        self.col: Collocation | None = None
+        self.step = 0
+        self.history: dict[str, list] = {k: [] for k in ("step", "lr", "total", "EI_raw", *TERMS)}
+        self.elapsed = 0.0
+
+    # ------------------------------------------------------------------ pieces
+    def sample(self, scale: int = 1) -> Collocation:
+        s, pt = self.s, self.pt
+        col = sample_collocation(
+            self.col_gens, s.n_pde * scale, s.n_bc * scale, s.n_ic * scale, load_fraction=s.load_fraction,
+            speed=pt.speed, delays=pt.delays, beta=pt.beta,
+        )
+        return col.to(self.device, self.dtype)
+
+    def _eval(self, col: Collocation):
+        terms = self.objective.terms(self.model, self.pt, col)
+        total, per = self.objective.total(terms, self.pt)
+        return total, per, terms
+
+    def loss(self, col: Collocation):
+        try:
+            return self._loss(col)
+        except Exception as exc:
+            if not self.compiled:
+                raise
+            log.warning("torch.compile failed (%s: %s); falling back to eager", exc.__class__.__name__, exc)
+            self.compiled = False
+            self.objective = Objective(**{**self.objective.__dict__, "engine": self.s.engine})
+            self._loss = self._eval
+            return self._eval(col)
+
+    def guard(self, total: torch.Tensor, where: str) -> None:
+        bad = not bool(torch.isfinite(total))
+        if not bad:
+            for p in self.model.parameters():
+                if not bool(torch.isfinite(p).all()):
+                    bad = True
+                    break
+        lei = self.model.log_ei.detach()
+        if bad or bool((lei.abs() > self.s.max_log_ei).any()):
+            what = (
+                f"non-finite loss or parameter (loss = {float(total):.3g})"
+                if bad
+                else f"log(EI/EI_ref) = {lei.cpu().numpy().round(3).tolist()} beyond +-{self.s.max_log_ei}"
+            )
+            exc = TrainingDiverged(f"PINN training diverged at step {self.step} ({where}): {what}")
+            exc.step = self.step
+            raise exc
+
+    def record(self, lr: float, total_per: torch.Tensor, terms: dict) -> None:
+        h = self.history
+        h["step"].append(self.step)
+        h["lr"].append(lr)
+        h["total"].append(total_per.detach().cpu().double().numpy())
+        for k in TERMS:
+            h[k].append(terms[k].detach().cpu().double().numpy())
+        h["EI_raw"].append(self.EI_raw())
+
+    def EI_raw(self) -> np.ndarray:
+        return self.problem.EI_ref * np.exp(self.model.log_ei.detach().cpu().double().numpy())
+
+    # ------------------------------------------------------------------ phases
+    def adam_step(self) -> None:
+        s = self.s
+        if self.col is None or (s.resample_every and self.step % s.resample_every == 0):
+            self.col = self.sample()
+        lr = s.learning_rate(self.step)
+        for g in self.adam.param_groups:
+            g["lr"] = lr * g.get("lr_factor", 1.0)
+        self.adam.zero_grad(set_to_none=True)
+        total, per, terms = self.loss(self.col)
+        total.backward()
+        self.guard(total, "Adam")
+        self.adam.step()
+        if self.step % s.log_every == 0:
+            self.record(lr, per, terms)
+        self.step += 1
+
+    def lbfgs_chunk(self, n: int) -> None:
+        if self.lbfgs is None:
+            self.col = self.sample(scale=1)
+            self.lbfgs = torch.optim.LBFGS(
+                self.model.parameters(), lr=1.0, max_iter=n, history_size=50, tolerance_grad=0.0,
+                tolerance_change=0.0, line_search_fn="strong_wolfe",
+            )
+        for g in self.lbfgs.param_groups:
+            g["max_iter"] = n
+            g["max_eval"] = int(n * 1.25)
+        last = {}
+
+        def closure():
+            self.lbfgs.zero_grad(set_to_none=True)
+            total, per, terms = self.loss(self.col)
+            if not bool(torch.isfinite(total)):
+                return total  # the line search rejects it; checked after the chunk
+            total.backward()
+            last["v"] = (per, terms)
+            return total
+
+        self.lbfgs.step(closure)
+        total, per, terms = self.loss(self.col)
+        self.guard(total.detach(), "L-BFGS")
+        self.step += n
+        self.record(0.0, per, terms)
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict:
+        return {
+            "schema": CHECKPOINT_SCHEMA,
+            "settings": self.s.to_dict(),
+            "members": self.M,
+            "step": self.step,
+            "model": self.model.state_dict(),
+            "adam": self.adam.state_dict(),
+            "lbfgs": None if self.lbfgs is None else self.lbfgs.state_dict(),
+            "col_gens": [g.get_state() for g in self.col_gens],
+            "col": None if self.col is None else tuple(tuple(a.cpu() for a in p) for p in self.col),
+            "history": self.history,
+            "elapsed": self.elapsed,
+        }
+
+    def load_state_dict(self, st: dict) -> None:
+        if st.get("schema") != CHECKPOINT_SCHEMA or st["settings"] != self.s.to_dict() or st["members"] != self.M:
+            raise ValueError("checkpoint was written by a fit with different settings or members")
+        self.model.load_state_dict(st["model"])
+        self.adam.load_state_dict(st["adam"])
+        for g, state in zip(self.col_gens, st["col_gens"], strict=True):
+            g.set_state(state)
+        self.col = None if st["col"] is None else Collocation(*st["col"]).to(self.device, self.dtype)
+        self.step, self.history, self.elapsed = st["step"], st["history"], st["elapsed"]
+        if st["lbfgs"] is not None:
+            self.lbfgs = torch.optim.LBFGS(
+                self.model.parameters(), lr=1.0, history_size=50, tolerance_grad=0.0, tolerance_change=0.0,
+                line_search_fn="strong_wolfe",
+            )
+            self.lbfgs.load_state_dict(st["lbfgs"])
+
+    def save(self, path: Path) -> None:
+        tmp = path.with_name(f".{path.name}.tmp")
+        torch.save(self.state_dict(), tmp)
+        os.replace(tmp, path)
+
+
+def fit(
+    problem: Problem,
+    settings: TrainSettings | str | None = None,
+    seed: int | np.random.SeedSequence = 0,
+    *,
+    members: int | None = None,
+    device: str | torch.device = "cpu",
+    quiet: bool = False,
+    checkpoint: str | Path | None = None,
+    resume: bool = True,
+    init_state: dict | None = None,
+    callback: Callable[[int, dict], None] | None = None,
+) -> FitResult:
+    """Train a PINN (or M of them together) on a problem and return the EI estimate.
+
+    Parameters
+    ----------
+    problem : Problem, the girder, axles, (possibly perturbed) data, EI_ref and optional noise sd /
+        anchor (posterior-scaled objective, see `losses`)
+    settings : TrainSettings, or a profile name ('smoke', 'fast', 'paper'); default 'fast'
+    seed : int or numpy SeedSequence; member m uses independent streams derived from (seed, m)
+    members : None for one network (scalar results) or M >= 1 to train M members together as one
+        batched network (array results of shape (M,)); member m starts from the same weights and draws
+        the same points as a single fit with the same seed would for m = 0
+    device : 'cpu', 'cuda' or 'auto'
+    quiet : no progress bar
+    checkpoint : file to save the state to (and resume from, with ``resume=True``)
+    init_state : a state_dict to start from (e.g. `FitResult.state` of an earlier fit) instead of the
+        seeded initial weights
+    callback : called as callback(step, info) after each Adam step / L-BFGS chunk, info holding
+        'phase' and 'EI_raw'; an exception raised by it stops the fit (the checkpoint stays)
+
+    Returns
+    -------
+    FitResult
+
+    Raises
+    ------
+    TrainingDiverged : a non-finite loss or parameter, or log(EI/EI_ref) beyond settings.max_log_ei;
+        the message and the exception's ``step`` attribute name the step.
+    """
+    if settings is None or isinstance(settings, str):
+        settings = TrainSettings.for_profile(settings or "fast")
+    if problem.beta is None:  # pragma: no cover - Problem fills it
+        raise ValueError("problem.beta unset")
+    M = 1 if members is None else int(members)
+    if M < 1:
+        raise ValueError(f"members must be >= 1, got {members}")
+    dev = _resolve_device(device)
+    t0 = time.perf_counter()
+    tr = _Trainer(problem, settings, seed, M, dev)
+    if init_state is not None:
+        tr.model.load_state_dict(init_state)
+    path = Path(checkpoint) if checkpoint is not None else None
+    if path is not None and resume and path.exists():
+        tr.load_state_dict(torch.load(path, map_location=dev, weights_only=False))
+        log.info("resumed PINN fit from %s at step %d", path, tr.step)
+    s = settings
+    n_total = s.epochs + s.lbfgs_iters
+    elapsed0 = tr.elapsed
+
+    def save_now():
+        if path is not None:
+            tr.elapsed = elapsed0 + time.perf_counter() - t0
+            tr.save(path)
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=n_total, initial=min(tr.step, n_total), disable=quiet, desc="PINN", unit="step",
+               leave=False, dynamic_ncols=True)
+    try:
+        while tr.step < s.epochs:
+            tr.adam_step()
+            bar.update(1)
+            if tr.step % s.log_every == 0 or tr.step == s.epochs:
+                bar.set_postfix(EI=f"{np.median(tr.EI_raw()):.4g}", loss=f"{tr.history['total'][-1].sum():.3g}",
+                                refresh=False)
+            if path is not None and tr.step % s.checkpoint_every == 0:
+                save_now()
+            if callback is not None:
+                callback(tr.step, {"phase": "adam", "EI_raw": tr.EI_raw()})
+        while tr.step < n_total:
+            n = min(s.lbfgs_chunk, n_total - tr.step)
+            tr.lbfgs_chunk(n)
+            bar.update(n)
+            save_now()
+            if callback is not None:
+                callback(tr.step, {"phase": "lbfgs", "EI_raw": tr.EI_raw()})
+    finally:
+        bar.close()
+    # final losses on the last point set
+    if tr.col is None:
+        tr.col = tr.sample()
+    total, per, terms = tr._eval(tr.col)
+    tr.guard(total.detach(), "final")
+    losses = {k: terms[k].detach().cpu().double().numpy() for k in terms}
+    losses["total"] = per.detach().cpu().double().numpy()
+    save_now()
+    EI_raw = tr.EI_raw()
+    factor = 1.0
+    if s.correct_beta:
+        factor = beta_bias_factor(problem.beam, problem.vehicle, problem.datasets[0], problem.beta,
+                                  EI=float(np.median(EI_raw)))
+    EI = EI_raw / factor
+    hist = {k: np.asarray(v) for k, v in tr.history.items()}
+    runtime = elapsed0 + time.perf_counter() - t0
+    single = members is None
+    squeeze = (lambda a: float(np.asarray(a).reshape(-1)[0])) if single else (lambda a: np.asarray(a))  # noqa: E731
+    log.info("PINN fit: EI = %s N m^2 (raw %s, beta factor %.6f) in %.1f s", np.round(EI, 0), np.round(EI_raw, 0),
+             factor, runtime)
+    return FitResult(
+        EI=squeeze(EI),
+        EI_raw=squeeze(EI_raw),
+        beta_factor=float(factor),
+        losses={k: squeeze(v) for k, v in losses.items()},
+        history=hist,
+        state={k: v.detach().cpu().clone() for k, v in tr.model.state_dict().items()},
+        runtime_s=runtime,
+        steps=tr.step,
+        settings=s,
+        members=members,
+        problem=problem,
+    )
+
+
+def rel_error(EI: float | np.ndarray, truth: float) -> float | np.ndarray:
+    """Relative error (EI - truth) / truth [-]."""
+    return (np.asarray(EI) - truth) / truth if np.ndim(EI) else (float(EI) - truth) / truth
+
+
+__all__ = ["FitResult", "fit", "rel_error"]

@@ -1,0 +1,285 @@
+"""What a run report says, as document blocks (rendered to report.md and report.html alike)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from ..config import Config, snr_label
+from .agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement, caveats
+from .document import Alert, Block, BulletList, Code, Figure, Heading, Paragraph, table
+from .figures import FigureFile
+from .table5 import HEADER as T5_HEADER
+from .table5 import table5_rows
+from .units import (
+    DISPLAY,
+    REFERENCE_KEY,
+    ei_decimals,
+    fmt,
+    fmt_EI,
+    fmt_EI_interval,
+    fmt_EI_sd,
+    fmt_interval,
+    fmt_pct,
+    name,
+    sigma_unit,
+)
+
+NOT_IDENTIFIED = "EI is not identified by these data"
+
+
+def title(summary: dict) -> str:
+    snr = snr_label(summary.get("snr_db"))
+    where = "unknown SNR (measured data)" if summary.get("truth") is None else (
+        "clean data" if summary.get("snr_db") is None else f"SNR {snr} dB")
+    return f"bayespinn report: {summary['case']} case, {where}"
+
+
+def not_identified(methods: dict) -> list[tuple[str, str]]:
+    """(method key, explanation or '') for every method whose entry says `identified: false`."""
+    out = []
+    for key, m in methods.items():
+        if m.get("identified") is False:
+            why = [str(v) for k, v in m.items() if "identif" in k and k != "identified" and isinstance(v, str)]
+            out.append((key, " ".join(why)))
+    return out
+
+
+def alerts(summary: dict) -> list[Block]:
+    """The statements that go on top: identifiability, unconverged samplers, disagreement."""
+    out: list[Block] = []
+    for key, why in not_identified(summary["methods"]):
+        out.append(Alert(f"**{NOT_IDENTIFIED}** ({name(key)}). " + (why or
+                         "The posterior of EI is essentially its prior: its intervals are not a measurement.")))
+    for key, m in summary["methods"].items():
+        if (m.get("diagnostics") or {}).get("converged") is False:
+            out.append(Alert(f"{name(key)} did not meet its convergence criteria (R-hat, ESS): "
+                             "its intervals are approximate. See Diagnostics."))
+    for v in agreement(summary["methods"]):
+        if v.agrees is False:
+            out.append(Alert(v.sentence()))
+    return out
+
+
+def data_section(result, cfg: Config) -> list[Block]:
+    s, data, truth = result.summary, result.data, result.truth
+    unit_q = "deflection" if s["case"] == "deflection" else "strain"
+    f, unit = DISPLAY[unit_q]
+    v = np.asarray(data.value, float)
+    rows = [
+        ("source", result.manifest.get("data", "n/a")),
+        ("case", s["case"]),
+        ("observations", f"{len(data)} ({', '.join(sorted(set(data.kind.tolist())))})"),
+        ("positions x", f"{data.x.min():.3f} to {data.x.max():.3f} m (span {cfg.beam.length:g} m)"),
+        ("times t", f"{data.t.min():.3f} to {data.t.max():.3f} s (crossing T = {cfg.duration:.3f} s)"),
+        (f"values ({unit})", f"min {v.min() * f:.4g}, max {v.max() * f:.4g}, rms {np.sqrt(np.mean(v**2)) * f:.4g}"),
+    ]
+    if data.is_strain.any():
+        names, counts = np.unique(data.sensor[data.is_strain], return_counts=True)
+        rows.append(("gauges", ", ".join(f"{n or 'unnamed'} ({c})" for n, c in zip(names, counts, strict=True))))
+    fs, su = sigma_unit(s["case"])
+    if truth is None:
+        rows += [("true EI", "unknown (measured data)"), ("SNR", "unknown (measured data)")]
+    else:
+        rows += [
+            ("nominal SNR", "clean (σ = 0)" if s.get("snr_db") is None else f"{snr_label(s['snr_db'])} dB"),
+            ("realised SNR", f"{s['realised_snr_db']:.2f} dB" if s.get("realised_snr_db") is not None else "n/a"),
+            ("true EI", f"{fmt_EI(truth['EI'])} GN m²"),
+            ("true noise sd σ", f"{truth['sigma'] * fs:.4g} {su}"),
+        ]
+    rows += [("seed", str(s["seed"])), ("profile", f"`{s['profile']}`")]
+    out: list[Block] = [Heading("Data"), table(("item", "value"), rows)]
+    if truth is None:
+        out.append(Paragraph("Measured data: **the truth (EI) and the SNR are unknown**, so no errors against "
+                             "the truth and no truth lines are reported; the intervals are the result."))
+    return out
+
+
+def ei_table(summary: dict) -> list[Block]:
+    truth = summary.get("truth")
+    rows = []
+    for key, m in summary["methods"].items():
+        e = m["EI"]
+        err = fmt_pct(e["rel_error_pct"]) if e.get("rel_error_pct") is not None else "n/a (truth unknown)"
+        flag = f" ({NOT_IDENTIFIED.lower()})" if m.get("identified") is False else ""
+        d = ei_decimals(e["ci90"][1] - e["ci90"][0])
+        rows.append((name(key) + flag, fmt_EI(e["mean"], d), fmt_EI_sd(e["sd"]), fmt_EI(e.get("median"), d),
+                     fmt_EI_interval(e["ci90"]), fmt_EI_interval(e["ci95"]), err))
+    cap = ("Relative error = 100 (mean - truth) / truth." if truth else
+           "Truth unknown (measured data): no relative errors.")
+    return [Heading("Flexural rigidity EI"),
+            table(("method", "mean (GN m²)", "sd (GN m²)", "median", "90 % interval", "95 % interval",
+                   "rel. error"), rows, cap)]
+
+
+def sigma_table(summary: dict) -> list[Block]:
+    f, unit = sigma_unit(summary["case"])
+    truth = summary.get("truth")
+    ts = truth.get("sigma") if truth else None
+    rows = []
+    for key, m in summary["methods"].items():
+        s = m["sigma"]
+        err = f"{100 * (s['mean'] - ts) / ts:+.1f} %" if ts else "n/a"
+        rows.append((name(key), fmt(s["mean"] * f), fmt(s["sd"] * f, ".3g"), fmt_interval(s["ci90"], f),
+                     fmt_interval(s["ci95"], f), err))
+    cap = (f"True σ = {ts * f:.4g} {unit}." if ts else
+           "Clean data: the true σ is 0." if truth else "Truth unknown (measured data).")
+    return [Heading("Measurement noise σ"),
+            table(("method", f"mean ({unit})", f"sd ({unit})", f"90 % interval ({unit})",
+                   f"95 % interval ({unit})", "rel. error"), rows, cap)]
+
+
+def comparison_section(summary: dict) -> list[Block]:
+    methods = summary["methods"]
+    verdicts = {v.method: v for v in agreement(methods)}
+    out: list[Block] = [Heading("Methods side by side and agreement verdict")]
+    rows = []
+    for key, m in methods.items():
+        e = m["EI"]
+        width = e["ci90"][1] - e["ci90"][0]
+        v = verdicts.get(key)
+        if key == REFERENCE_KEY:
+            d, r, lab = "0 (reference)", "1 (reference)", "reference"
+        elif v is None:
+            d, r, lab = "n/a", "n/a", "n/a"
+        else:
+            d = fmt(v.mean_diff_sd, "+.2f")
+            r = fmt(v.sd_ratio, ".2f")
+            lab = v.label
+        rows.append((name(key), fmt_EI(e["mean"], ei_decimals(width)), fmt_EI_interval(e["ci90"]),
+                     fmt_EI_sd(width), d, r, lab))
+    lo, hi = SD_RATIO_RANGE
+    out.append(table(("method", "EI mean (GN m²)", "90 % interval", "90 % width", "Δmean / reference sd",
+                      "sd / reference sd", "verdict"), rows,
+                     f"A PINN posterior is flagged when |Δmean| > {MEAN_TOL_SD:g} reference sd or its sd ratio "
+                     f"is outside [{lo:g}, {hi:g}]."))
+    if not verdicts:
+        only = "Only the modal reference ran" if REFERENCE_KEY in methods else "No PINN method ran"
+        out.append(Paragraph(f"{only}: no PINN posterior to check against the reference."))
+    else:
+        out.append(BulletList(tuple(v.sentence() for v in verdicts.values())))
+    for c in caveats(methods):
+        out.append(Alert(c, "info"))
+    for key, m in methods.items():
+        if m.get("member_EI"):
+            members = ", ".join(fmt_EI(v) for v in m["member_EI"])
+            out.append(Paragraph(f"{name(key)} members' EI (GN m²): {members}."))
+    return out
+
+
+def _other_diag(d: dict) -> str:
+    parts = []
+    for k, v in d.items():
+        if k in ("rhat", "ess_bulk", "ess_tail", "converged") or isinstance(v, dict | list):
+            continue
+        parts.append(f"{k} = {fmt(v) if isinstance(v, int | float) and not isinstance(v, bool) else v}")
+    return "; ".join(parts) or "-"
+
+
+def diagnostics_section(summary: dict) -> list[Block]:
+    rows = []
+    for key, m in summary["methods"].items():
+        d = m.get("diagnostics") or {}
+        rows.append((name(key), fmt(d.get("rhat"), ".4f"), fmt(d.get("ess_bulk"), ".0f"), fmt(d.get("ess_tail"), ".0f"),
+                     str(d.get("converged", "n/a")), _other_diag(d)))
+    return [Heading("Diagnostics"),
+            table(("method", "R-hat", "bulk ESS", "tail ESS", "converged", "other"), rows,
+                  "R-hat and ESS from ArviZ (rank-normalised split R-hat); n/a where a method has none.")]
+
+
+def runtime_section(result) -> list[Block]:
+    s = result.summary
+    rows = [(name(k), f"{m['runtime_s']:.1f}") for k, m in s["methods"].items()]
+    total = (result.manifest.get("timings_s") or {}).get("total_s")
+    if total is not None:
+        rows.append(("whole run (data, all methods)", f"{total:.1f}"))
+    return [Heading("Run times"), table(("method", "seconds"), rows)]
+
+
+def figures_section(figures: list[FigureFile], notes: list[str]) -> list[Block]:
+    out: list[Block] = [Heading("Figures")]
+    out += [Figure(f.title, f.name, f.caption) for f in figures]
+    if notes:
+        out.append(BulletList(tuple(notes)))
+    if not figures and not notes:
+        out.append(Paragraph("No figure was drawn."))
+    return out
+
+
+def table5_section(table5s: list[dict], notes: list[str]) -> list[Block]:
+    if not table5s and not notes:
+        return []
+    out: list[Block] = [Heading("Responses against the FE truth (paper Table 5 with uncertainty)")]
+    if table5s:
+        out.append(Paragraph(
+            "Posterior predictive mean of the noise-free response against the finite-element truth at "
+            f"{table5s[0]['n_points']} interior points of the span. RMSE in mm (deflection u) and kN m "
+            "(moment M), with the 90 % interval of the RMSE of single posterior draws; CV = RMSE / "
+            "mean|truth| x 100; NMB = sum(pred - truth) / sum(truth) x 100; 'band covers FE': share of "
+            "the points where the 90 % credible band contains the truth."))
+    for t5 in table5s:
+        out.append(table(T5_HEADER, table5_rows(t5), name(t5["method"])))
+    if notes:
+        out.append(BulletList(tuple(notes)))
+    return out
+
+
+def _jsonable(o):
+    if isinstance(o, float) and not math.isfinite(o):
+        return None
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.generic):
+        return o.item()
+    return o
+
+
+def manifest_section(manifest: dict, truth_known: bool = True) -> list[Block]:
+    cmd = manifest.get("command")
+    cmd_s = " ".join(map(str, cmd)) if isinstance(cmd, list | tuple) else str(cmd)
+    items = [
+        f"command: `{cmd_s}`",
+        f"seed: {manifest.get('seed')}",
+        f"SNR: {snr_label(manifest.get('snr_db')) + ('' if manifest.get('snr_db') is None else ' dB') if truth_known else 'unknown (measured data)'}",
+        f"data: {manifest.get('data')}",
+        f"methods: {', '.join(manifest.get('methods', []))}",
+        f"options: {', '.join(f'{k} = {v}' for k, v in (manifest.get('options') or {}).items())}",
+        f"device: {manifest.get('device')}",
+        f"git commit: {manifest.get('git_commit') or 'n/a'}",
+    ]
+    versions = manifest.get("versions") or {}
+    timings = manifest.get("timings_s") or {}
+    out: list[Block] = [Heading("Manifest"),
+                        Paragraph("The same as `manifest.json`: what produced this report."),
+                        BulletList(tuple(items)),
+                        Heading("Versions", 3),
+                        table(("package", "version"), [(k, v or "not installed") for k, v in versions.items()])]
+    if timings:
+        out += [Heading("Timings", 3), table(("step", "seconds"), [(k, fmt(v, ".2f")) for k, v in timings.items()])]
+    out += [Heading("Resolved configuration (SI units)", 3),
+            Code(json.dumps(_jsonable(manifest.get("config", {})), indent=2), "json")]
+    return out
+
+
+def run_document(result, cfg: Config, figures: list[FigureFile] = (), figure_notes: list[str] = (),
+                 table5s: list[dict] = (), table5_notes: list[str] = ()) -> list[Block]:
+    """Every block of a run report, in order."""
+    s = result.summary
+    blocks: list[Block] = [Heading(title(s), 1)]
+    blocks += alerts(s)
+    if result.truth is None:
+        blocks.append(Alert("Measured data: the truth and the SNR are unknown.", "info"))
+    blocks += data_section(result, cfg)
+    blocks += ei_table(s)
+    blocks += sigma_table(s)
+    blocks += comparison_section(s)
+    blocks += diagnostics_section(s)
+    blocks += runtime_section(result)
+    blocks += figures_section(list(figures), list(figure_notes))
+    blocks += table5_section(list(table5s), list(table5_notes))
+    blocks += manifest_section(result.manifest, result.truth is not None)
+    return blocks

@@ -1,0 +1,49 @@
+"""`write_reports`: a run folder's figures, report.md and report.html, from a `pipeline.RunResult`."""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from ..config import Config
+from . import predictive as pv
+from .content import run_document, title
+from .figures import make_figures
+from .files import write_text
+from .html import render_html
+from .markdown import render_markdown
+from .table5 import table5
+
+log = logging.getLogger(__name__)
+
+
+def run_table5s(result, cfg: Config) -> tuple[list[dict], list[str]]:
+    """Table 5 for every method with a predictor when the truth is known; notes for those left out."""
+    if result.truth is None:
+        return [], []
+    out, notes = [], []
+    for key in pv.with_predictor(result.posteriors):
+        try:
+            out.append(table5(result, cfg, key))
+        except Exception as exc:  # the table is an extra: never lose the report for it
+            log.warning("warning: Table 5 for %s failed and is left out: %s: %s", key, type(exc).__name__, exc)
+            notes.append(f"Table 5 for {key} left out: {type(exc).__name__}: {exc}.")
+    return out, notes
+
+
+def write_reports(result, cfg: Config, folder: str | Path, *, figures: bool = True) -> dict[str, Path]:
+    """Write the figures (PNG), report.md and report.html into `folder`.
+
+    A figure or table that fails is logged as a warning and left out, with a note in the reports.
+    Returns the paths written, by kind ('report.md', 'report.html', and each figure's file name).
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    figs, fig_notes = make_figures(result, cfg, folder) if figures else ([], [])
+    t5s, t5_notes = run_table5s(result, cfg)
+    blocks = run_document(result, cfg, figs, fig_notes, t5s, t5_notes)
+    write_text(folder / "report.md", render_markdown(blocks))
+    write_text(folder / "report.html", render_html(blocks, folder, title(result.summary)))
+    paths = {f.name: folder / f.name for f in figs}
+    paths.update({"report.md": folder / "report.md", "report.html": folder / "report.html"})
+    return paths

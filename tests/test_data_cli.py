@@ -1,0 +1,168 @@
+"""Configuration, synthetic data, the measurement CSV and the command line's handling of bad input."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayespinn.config import EXETER_EI, parse_snr, preset, resolve
+from bayespinn.data.measurements import read_csv
+from bayespinn.data.synthetic import realised_snr, simulate
+from bayespinn.errors import InputError
+from bayespinn.physics.modal import ModalModel
+
+#: simulate's truth (converged FE) vs closed form, contract/issue targets
+DEFLECTION_TRUTH_TOL, STRAIN_TRUTH_TOL = 1e-3, 1e-2
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "bayespinn", *args], capture_output=True, text=True, cwd=cwd)
+
+
+def _rel_rms(a, b):
+    return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b**2)))
+
+
+def test_exeter_preset():
+    cfg = preset()
+    assert cfg.beam.EI == pytest.approx(1.03361e9, rel=1e-5) and EXETER_EI == cfg.beam.EI
+    assert cfg.duration == pytest.approx(17.28 / 7.115)
+    truck = preset("strain").vehicle
+    assert truck.loads.sum() == pytest.approx(0.55 * (2 * 67.2e3 + 2 * 89.8e3))
+    assert preset("strain").duration == pytest.approx((17.28 + 6.5) / 7.115)
+
+
+def test_toml_overrides(tmp_path):
+    f = tmp_path / "c.toml"
+    f.write_text("[beam]\nlength = 20.0\nEI = 2e9\n[vehicle]\nspeed = 10.0\naxles = [{load = 5e4, offset = 0.0}, {load = 6e4, offset = 3.0}]\n[data]\nn_points = 50\n")
+    cfg = resolve("deflection", f)
+    assert (cfg.beam.length, cfg.beam.EI, cfg.vehicle.speed, cfg.data.n_points) == (20.0, 2e9, 10.0, 50)
+    assert cfg.vehicle.offsets.tolist() == [0.0, 3.0]
+    assert cfg.beam.mass_per_length == 289.0  # untouched preset value
+
+
+@pytest.mark.parametrize(
+    "text,field",
+    [
+        ("[beam]\nlength = -3.0\n", "beam.length"),
+        ("[beam]\nEI = 'stiff'\n", "beam.EI"),
+        ("[beam\nlength = 3\n", "--config"),
+        ("[vehicle]\naxles = [{load = -1.0, offset = 0.0}]\n", "vehicle.axles[0].load"),
+        ("[beam]\nlenght = 3.0\n", "beam.lenght"),
+    ],
+)
+def test_bad_toml_names_the_field(tmp_path, text, field):
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    with pytest.raises(InputError) as e:
+        resolve("deflection", f)
+    assert e.value.field == field
+
+
+@pytest.mark.parametrize("s", ["nan", "inf", "abc", "-5", "0"])
+def test_bad_snr(s):
+    with pytest.raises(InputError):
+        parse_snr(s)
+
+
+def test_simulate_clean_matches_closed_form(exeter):
+    d = simulate(exeter, None, 3)
+    assert len(d) == 100 and np.array_equal(d.value, d.value_true)
+    ref = ModalModel(exeter.beam, exeter.vehicle, d.x, d.t, n_modes=40).predict(exeter.beam.EI)
+    assert _rel_rms(d.value, ref) < DEFLECTION_TRUTH_TOL
+
+
+def test_simulate_strain_matches_closed_form(exeter_strain):
+    d = simulate(exeter_strain, None, 0)
+    assert set(d.sensor) == {"S1", "S2", "S3", "S4"}
+    ref = ModalModel(exeter_strain.beam, exeter_strain.vehicle, d.x, d.t, *d.weights, n_modes=40).predict(
+        exeter_strain.beam.EI
+    )
+    assert _rel_rms(d.value, ref) < STRAIN_TRUTH_TOL
+    # bottom flange in tension under a load near midspan
+    s4 = (d.sensor == "S4") & (np.abs(d.t - 0.5 * exeter_strain.duration) < 0.1)
+    assert np.all(d.value[s4] > 0)
+
+
+def test_realised_snr_and_seed(exeter):
+    a, b = simulate(exeter, 20.0, 4), simulate(exeter, 20.0, 4)
+    np.testing.assert_array_equal(a.value, b.value)
+    assert abs(realised_snr(a.value, a.value_true) - 20.0) < 1.5
+    c = simulate(exeter, 20.0, 5)
+    assert not np.array_equal(a.value, c.value)
+
+
+def test_csv_round_trip(tmp_path, exeter_strain):
+    d = simulate(exeter_strain, 30.0, 1)
+    d.to_csv(tmp_path / "s.csv")
+    r = read_csv(tmp_path / "s.csv", exeter_strain.beam.length)
+    for f in ("x", "t", "value", "y", "value_true"):
+        np.testing.assert_array_equal(getattr(r, f), getattr(d, f))
+    assert list(r.sensor) == list(d.sensor) and list(r.kind) == list(d.kind)
+
+
+GOOD = "x,t,value,kind\n1.0,0.5,0.001,deflection\n"
+
+
+@pytest.mark.parametrize(
+    "content,where",
+    [
+        ("x,t,value,kind\n1.0,0.5,nan,deflection\n", "row 2, column value"),
+        ("x,t,value,kind\n99.0,0.5,0.001,deflection\n", "row 2, column x"),
+        ("x,t,value,kind\n1.0,-0.5,0.001,deflection\n", "row 2, column t"),
+        ("x,t,kind\n1.0,0.5,deflection\n", "header"),
+        ("", "--data"),
+        ("x,t,value,kind\n1.0,0.5,abc,deflection\n", "row 2, column value"),
+        ("x,t,value,kind\n1.0,0.5,0.001,tilt\n", "row 2, column kind"),
+        ("x,t,value,kind,y\n1.0,0.5,1e-5,strain,\n", "row 2, column y"),
+        ("x,t,value,kind\n1.0,0.5,inf,deflection\n", "row 2, column value"),
+    ],
+)
+def test_bad_csv(tmp_path, content, where):
+    f = tmp_path / "m.csv"
+    f.write_text(content)
+    with pytest.raises(InputError) as e:
+        read_csv(f, 17.28)
+    assert where in e.value.field
+
+
+def test_binary_csv(tmp_path):
+    f = tmp_path / "m.csv"
+    f.write_bytes(bytes(range(256)) * 4)
+    with pytest.raises(InputError):
+        read_csv(f, 17.28)
+
+
+def test_cli_simulate_and_bad_input(tmp_path):
+    r = _cli("simulate", "--case", "deflection", "--snr", "clean", "--seed", "3", "--out", str(tmp_path / "a.csv"))
+    assert r.returncode == 0, r.stderr
+    assert len((tmp_path / "a.csv").read_text().splitlines()) == 101
+    bad_toml = tmp_path / "bad.toml"
+    bad_toml.write_text("[beam]\nlength = -1\n")
+    for args in (["--snr", "nan"], ["--snr", "inf"], ["--snr", "abc"], ["--snr=-5"], ["--snr", "10", "--config", str(bad_toml)],
+                 ["--snr", "10", "--case", "tilt"], ["--snr", "10", "--device", "tpu"]):
+        out = tmp_path / "b.csv"
+        r = _cli("simulate", *args, "--out", str(out))
+        assert r.returncode == 2, (args, r.stderr)
+        assert "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1
+        assert not out.exists()
+
+
+def test_cli_run_bad_data_leaves_nothing(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,t,value,kind\n1.0,0.5,nan,deflection\n")
+    out = tmp_path / "run"
+    r = _cli("run", "--data", str(bad), "--method", "modal", "--out", str(out))
+    assert r.returncode == 2 and "column value" in r.stderr and "Traceback" not in r.stderr
+    assert not (out / "summary.json").exists()
+
+
+def test_cuda_without_gpu_is_bad_input(tmp_path):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("a GPU is present")
+    r = _cli("simulate", "--snr", "10", "--device", "cuda", "--out", str(tmp_path / "a.csv"))
+    assert r.returncode == 2 and "cuda" in r.stderr.lower()

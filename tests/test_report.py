@@ -1,0 +1,248 @@
+"""Reports: run folders with figures, report.md and a self-contained report.html; verdicts; Table 5.
+
+One small modal-only run (40 deflection points, the `smoke` profile, a few seconds) is shared by the
+module; other situations (PINN methods, identifiability, failures) are built from it by hand, so no
+PINN is trained here.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import logging
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bayespinn.config import preset
+from bayespinn.pipeline import RunResult, run
+from bayespinn.report import agreement, table5, table5_markdown, write_reports
+from bayespinn.report import figures as figmod
+from bayespinn.report.agreement import compare
+from bayespinn.report.predictive import fe_truth
+from bayespinn.report.sweep import write_sweep_reports
+from bayespinn.uq.methods import RunOptions
+from bayespinn.uq.modal_mcmc import ModalPredictor
+from bayespinn.uq.posterior import Posterior
+
+RUN_FIGURES = ("fig_posteriors.png", "fig_data_fit.png", "fig_span_profiles.png")
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+#: Table 5 oracle: exact arithmetic on float64 profiles of ~1e-3 m and ~1e5 N m
+ORACLE_TOL = 1e-9
+
+
+def small_config(case: str = "deflection"):
+    cfg = preset(case)
+    return dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, n_points=40, sample_rate=20.0))
+
+
+@pytest.fixture(scope="module")
+def defl(tmp_path_factory):
+    """(cfg, RunResult, folder) of a modal-only deflection run at 20 dB."""
+    cfg = small_config()
+    out = tmp_path_factory.mktemp("run") / "defl"
+    res = run(cfg, methods=["modal"], snr_db=20.0, seed=0, out=out, opts=RunOptions(profile="smoke"), argv=["test"])
+    return cfg, res, out
+
+
+def assert_self_contained(folder: Path, expected_figures) -> str:
+    """report.html embeds every figure of report.md as a PNG data URI and points nowhere outside."""
+    md = (folder / "report.md").read_text(encoding="utf-8")
+    html = (folder / "report.html").read_text(encoding="utf-8")
+    referenced = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
+    assert sorted(referenced) == sorted(expected_figures)
+    for name in referenced:
+        assert (folder / name).read_bytes().startswith(PNG_MAGIC)
+    srcs = re.findall(r'src="([^"]*)"', html)
+    assert len(srcs) == len(referenced) == html.count("<img ")
+    embedded = []
+    for s in srcs:
+        assert s.startswith("data:image/png;base64,"), s[:60]
+        embedded.append(base64.b64decode(s.split(",", 1)[1], validate=True))
+    assert sorted(embedded) == sorted((folder / n).read_bytes() for n in referenced)
+    for bad in ("http://", "https://", "<script", "<link", "url(", "@import", "<iframe"):
+        assert bad not in html.lower(), bad
+    for href in re.findall(r'href="([^"]*)"', html):
+        assert ":" not in href and not href.startswith("//"), href
+    return html
+
+
+def test_run_writes_figures_and_both_reports(defl):
+    cfg, res, out = defl
+    for f in RUN_FIGURES + ("report.md", "report.html", "summary.json", "manifest.json"):
+        assert (out / f).is_file(), f
+    assert not (out / "fig_gauges.png").exists()  # deflection data: no gauges
+    md = (out / "report.md").read_text(encoding="utf-8")
+    html = assert_self_contained(out, RUN_FIGURES)
+    e = res.summary["methods"]["modal_mcmc"]["EI"]
+    mean = f"{e['mean'] / 1e9:.4f}"
+    for text in (md, html):  # the same content in both
+        assert mean in text
+        for section in ("Data", "Flexural rigidity EI", "Measurement noise σ", "agreement verdict", "Diagnostics",
+                        "Run times", "Figures", "Table 5", "Manifest", "Resolved configuration"):
+            assert section in text, section
+        assert "Only the modal reference ran" in text
+        assert "rel. error" in text and "unknown" not in text.split("Manifest")[0].lower()
+
+
+def test_reports_are_a_function_of_the_result(defl, tmp_path):
+    """Same result, same figures: PNG bytes and report text do not depend on when they are written."""
+    cfg, res, out = defl
+    write_reports(res, cfg, tmp_path)
+    for f in RUN_FIGURES + ("report.md",):
+        assert (tmp_path / f).read_bytes() == (out / f).read_bytes(), f
+
+
+def _pinn_like(cfg, res) -> RunResult:
+    """The modal run plus an overconfident 'ensemble' (5 draws) and a 'bpinn' without predictor that
+    says EI is not identified."""
+    truth = res.truth
+    modal = res.posteriors["modal_mcmc"]
+    m, s = float(modal.EI.mean()), float(modal.EI.std())
+    ens_EI = (m + 3 * s + 0.05 * s * np.arange(-2, 3))[None, :]
+    ens = Posterior("ensemble", ens_EI, np.full_like(ens_EI, truth["sigma"]), info={"members": 5,
+                    "member_EI": ens_EI.ravel().tolist()}, runtime_s=1.0, predictor=ModalPredictor(cfg, ens_EI.ravel(), 6))
+    bp = Posterior("bpinn", modal.EI * 1.5, modal.sigma, info={"identified": False}, runtime_s=2.0)
+    posts = {"modal_mcmc": modal, "ensemble": ens, "bpinn": bp}
+    summary = {**res.summary, "methods": {k: p.summary(truth) for k, p in posts.items()}}
+    return RunResult(res.data, truth, posts, summary, res.manifest)
+
+
+def test_verdict_identifiability_and_missing_predictor(defl, tmp_path):
+    cfg, res, _ = defl
+    fake = _pinn_like(cfg, res)
+    write_reports(fake, cfg, tmp_path)
+    md = (tmp_path / "report.md").read_text(encoding="utf-8")
+    html = assert_self_contained(tmp_path, RUN_FIGURES)
+    for text in (md, html):
+        assert "EI is not identified by these data" in text
+        assert "Deep ensemble DISAGREES with the modal reference" in text
+        assert "overconfident" in text
+        assert "No posterior predictive for B-PINN" in text
+    # the not-identified sentence sits above the tables, as an alert
+    assert md.index("EI is not identified by these data") < md.index("## Data")
+    assert '<div class="alert"' in html.split("<h2>Data</h2>")[0]
+
+
+def test_a_failing_figure_does_not_lose_the_report(defl, tmp_path, monkeypatch, caplog):
+    cfg, res, _ = defl
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("simulated drawing failure")
+
+    figs = tuple((f, t, boom if f == "fig_span_profiles.png" else fn) for f, t, fn in figmod.FIGURES)
+    monkeypatch.setattr(figmod, "FIGURES", figs)
+    with caplog.at_level(logging.WARNING):
+        write_reports(res, cfg, tmp_path)
+    assert any("fig_span_profiles.png" in r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
+    assert not (tmp_path / "fig_span_profiles.png").exists()
+    assert_self_contained(tmp_path, ("fig_posteriors.png", "fig_data_fit.png"))
+    assert "simulated drawing failure" in (tmp_path / "report.md").read_text(encoding="utf-8")
+
+
+def test_measured_strain_data_with_a_held_out_gauge(tmp_path):
+    """Measured data (truth unknown) from gauge S2 only: the report says the truth and SNR are unknown
+    and the gauge figure shows S1, S3 and S4 as not used for training (paper Fig. 7)."""
+    from bayespinn.data.synthetic import simulate
+
+    cfg = small_config("strain")
+    data = simulate(cfg, 30.0, seed=1)
+    csv = tmp_path / "s2.csv"
+    data.select(data.sensor == "S2").to_csv(csv)
+    out = tmp_path / "run"
+    res = run(cfg, methods=["modal"], snr_db=None, data_path=str(csv), seed=0, out=out,
+              opts=RunOptions(profile="smoke"))
+    assert res.truth is None
+    figs = RUN_FIGURES + ("fig_gauges.png",)
+    html = assert_self_contained(out, figs)
+    md = (out / "report.md").read_text(encoding="utf-8")
+    for text in (md, html):
+        assert "the truth and the SNR are unknown" in text
+        assert "Gauges not used for training (a genuine out-of-sample check): S1, S3, S4." in text
+        assert "Table 5" not in text  # needs the truth
+        assert "n/a (truth unknown)" in text
+
+
+def test_agreement_verdicts():
+    ref = {"EI": {"mean": 1.0e9, "sd": 1.0e7}}
+    ok = compare({"EI": {"mean": 1.005e9, "sd": 1.1e7}}, ref, "ensemble")
+    assert ok.agrees is True and ok.mean_diff_sd == pytest.approx(0.5)
+    far = compare({"EI": {"mean": 1.02e9, "sd": 1.0e7}}, ref, "ensemble")
+    assert far.agrees is False and "mean +2.00 reference sd" in far.reasons[0]
+    narrow = compare({"EI": {"mean": 1.0e9, "sd": 0.5e7}}, ref, "bpinn")
+    assert narrow.agrees is False and "overconfident" in narrow.reasons[0]
+    wide = compare({"EI": {"mean": 1.0e9, "sd": 2.0e7}}, ref, "bpinn")
+    assert wide.agrees is False and "underconfident" in wide.reasons[0]
+    # the limits themselves: 1 sd and [0.67, 1.5] are inside
+    assert compare({"EI": {"mean": 1.0099e9, "sd": 1.49e7}}, ref, "ensemble").agrees is True
+    alone = agreement({"ensemble": {"EI": {"mean": 1e9, "sd": 1e7}}})
+    assert alone[0].agrees is None
+    assert agreement({"modal_mcmc": ref}) == []
+
+
+def _scaled_truth_predictor(cfg, factor):
+    def predictor(x, t, quantity, n_draws, rng):
+        return np.tile(factor * fe_truth(cfg, x, t, quantity), (4, 1))
+
+    return predictor
+
+
+def test_table5_against_an_oracle(defl):
+    """A predictor returning 1.1 x the FE truth: NMB = +10 %, CV = 10 rms|truth| / mean|truth| %,
+    RMSE = 0.1 rms(truth); the exact truth gives zeros and full coverage (negative control)."""
+    cfg, res, _ = defl
+    modal = res.posteriors["modal_mcmc"]
+    for factor, nmb in ((1.1, 10.0), (1.0, 0.0)):
+        p = dataclasses.replace(modal, predictor=_scaled_truth_predictor(cfg, factor))
+        fake = dataclasses.replace(res, posteriors={"modal_mcmc": p})
+        t5 = table5(fake, cfg, "modal_mcmc", n_points=51)
+        assert t5["times"] == [0.60, 1.22, 1.82]
+        x = np.linspace(0, cfg.beam.length, 53)[1:-1]
+        for row in t5["rows"]:
+            for q in ("deflection", "moment"):
+                truth = fe_truth(cfg, x, np.full(x.size, row["t"]), q)
+                m = row[q]
+                rms = float(np.sqrt(np.mean(truth**2)))
+                assert m["rmse"] == pytest.approx(abs(factor - 1) * rms, rel=ORACLE_TOL, abs=ORACLE_TOL * rms)
+                assert m["nmb_pct"] == pytest.approx(nmb, abs=ORACLE_TOL * 100)
+                cv = 100 * abs(factor - 1) * rms / float(np.mean(np.abs(truth)))
+                assert m["cv_pct"] == pytest.approx(cv, abs=ORACLE_TOL * 100)
+                assert m["coverage"] == (1.0 if factor == 1.0 else 0.0)
+    md = table5_markdown(t5)
+    assert md.count("\n| 0.60 |") == 1 and "CV = RMSE / mean|truth| x 100" in md
+
+
+def test_table5_on_the_modal_posterior(defl):
+    cfg, res, _ = defl
+    t5 = table5(res, cfg, "modal_mcmc")
+    for row in t5["rows"]:
+        for q in ("deflection", "moment"):
+            m = row[q]
+            assert m["rmse"] >= 0 and 0.0 <= m["coverage"] <= 1.0
+            assert m["rmse_ci90"][0] <= m["rmse_ci90"][1]
+    with pytest.raises(ValueError, match="truth"):
+        table5(dataclasses.replace(res, truth=None), cfg, "modal_mcmc")
+    with pytest.raises(ValueError, match="predictive"):
+        table5(res, cfg, "bpinn")
+
+
+def test_sweep_report(defl, tmp_path):
+    """Table 4 with intervals per level and the EI-against-SNR figure, self-contained."""
+    cfg, res, _ = defl
+    levels = [{"snr_db": s, "folder": f"snr{s}", "methods": res.summary["methods"]} for s in (20.0, 40.0)]
+    doc = {"schema": "bayespinn.sweep/1", "case": "deflection", "seed": 0, "levels": levels}
+    write_sweep_reports(doc, [res, res], tmp_path)
+    html = assert_self_contained(tmp_path, ("fig_sweep_ei.png",))
+    md = (tmp_path / "report.md").read_text(encoding="utf-8")
+    e = res.summary["methods"]["modal_mcmc"]["EI"]
+    for text in (md, html):
+        assert text.count("Modal reference (emcee)") >= 2
+        assert f"{e['rel_error_pct']:+.2f} %" in text
+        assert "20 dB" in text and "40 dB" in text and "paper EI" in text
+        assert "Table 5" in text
+    assert 'href="snr20.0/report.html"' in html
+    # without results (no truth, no Table 5) it still writes both reports
+    write_sweep_reports(doc, [], tmp_path / "bare")
+    assert_self_contained(tmp_path / "bare", ("fig_sweep_ei.png",))
