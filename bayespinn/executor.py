@@ -21,14 +21,31 @@ _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
 
 def _single_thread() -> None:
+    """Process-wide: one BLAS/OpenMP/torch thread (pool and Ray workers)."""
     for v in _THREAD_VARS:
         os.environ[v] = "1"
+    from threadpoolctl import threadpool_limits
+
+    threadpool_limits(1)
     try:
         import torch
 
         torch.set_num_threads(1)
     except Exception:  # noqa: BLE001 - torch is optional for pure-numpy tasks
         pass
+
+
+class _OneThread:
+    """Call fn(task) with one BLAS thread, so floating-point results never depend on where a task ran."""
+
+    def __init__(self, fn: Callable):
+        self.fn = fn
+
+    def __call__(self, task):
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(1):
+            return self.fn(task)
 
 
 def cpu_count() -> int:
@@ -66,6 +83,7 @@ class Executor:
     ) -> list:
         """[fn(t) for t in tasks], in parallel, in task order."""
         tasks = list(tasks)
+        fn = _OneThread(fn)
         if self.kind == "ray":
             return _ray_map(fn, tasks, self.address, resources or {"num_cpus": 1}, desc, progress)
         n = min(self.workers or cpu_count(), len(tasks)) if tasks else 1

@@ -1,0 +1,55 @@
+"""Executors: results are a function of the seed only, whatever runs them."""
+
+import dataclasses
+import importlib.util
+
+import pytest
+
+from bayespinn.config import preset
+from bayespinn.executor import Executor
+from bayespinn.uq.coverage import coverage_study
+from bayespinn.uq.methods import RunOptions
+from bayespinn.uq.sampler import MCMCSettings
+
+SMALL = RunOptions(profile="smoke", mcmc=MCMCSettings(n_walkers=8, n_groups=2, min_steps=250, tau_factor=5.0))
+
+
+def _strip(res):
+    return [(r["hit"], r["rel_error_pct"], r["interval"]) for r in res["records"]]
+
+
+def _study(executor):
+    return coverage_study("modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, executor=executor, progress=False)
+
+
+def test_local_results_do_not_depend_on_workers():
+    one = _study(Executor("local", workers=1))
+    two = _study(Executor("local", workers=2))
+    assert _strip(one) == _strip(two)
+
+
+def test_bad_executor_is_input_error():
+    from bayespinn.errors import InputError
+
+    with pytest.raises(InputError):
+        Executor("dask")
+
+
+@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="Ray is not installed (pip install 'bayespinn[ray]')")
+def test_ray_matches_local():
+    import ray
+
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
+    try:
+        local = _study(Executor("local", workers=2))
+        remote = _study(Executor("ray"))
+        assert _strip(local) == _strip(remote)
+    finally:
+        ray.shutdown()
+
+
+def test_replicate_options_are_picklable():
+    import pickle
+
+    opts = dataclasses.replace(SMALL, executor=Executor())
+    assert pickle.loads(pickle.dumps(opts)) == opts
