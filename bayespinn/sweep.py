@@ -29,6 +29,6 @@ def sweep(cfg: Config, *, levels: list, methods: list[str], seed: int, out: Path
     doc = {"schema": "bayespinn.sweep/1", "case": cfg.case, "seed": seed, "levels": entries}
     from .report.sweep import write_sweep_reports
 
-    write_sweep_reports(doc, results, out)
+    write_sweep_reports(doc, results, out, cfg=cfg)
     atomic_write_text(out / "sweep.json", json.dumps(_jsonable(doc), indent=2) + "\n")
     return doc

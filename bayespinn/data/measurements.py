@@ -88,6 +88,16 @@ class Measurements:
         atomic_write_text(path, buf.getvalue())
 
 
+def _umask_mode() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+#: ordinary permissions for written files (mkstemp would leave them owner-only)
+_FILE_MODE = _umask_mode()
+
+
 def atomic_write_text(path: str | Path, text: str) -> None:
     """Write text to path through a temporary file in the same folder, so no half-written file remains."""
     path = Path(path)
@@ -96,6 +106,7 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     try:
         with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
             fh.write(text)
+        os.chmod(tmp, _FILE_MODE)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

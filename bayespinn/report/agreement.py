@@ -46,8 +46,10 @@ class Verdict:
         if self.agrees is None:
             return f"{who}: no verdict ({'; '.join(self.reasons)})."
         if self.agrees:
-            return (f"{who} agrees with the modal reference (mean {self.mean_diff_sd:+.2f} reference sd away, "
-                    f"sd ratio {self.sd_ratio:.2f}).")
+            return (
+                f"{who} agrees with the modal reference (mean {self.mean_diff_sd:+.2f} reference sd away, "
+                f"sd ratio {self.sd_ratio:.2f})."
+            )
         return f"**{who} DISAGREES with the modal reference**: {'; '.join(self.reasons)}."
 
 
@@ -55,12 +57,23 @@ def _finite(v) -> bool:
     return isinstance(v, int | float) and math.isfinite(v)
 
 
-def compare(entry: dict, reference: dict, method: str, *, mean_tol_sd: float = MEAN_TOL_SD,
-            sd_ratio_range: tuple[float, float] = SD_RATIO_RANGE) -> Verdict:
+def compare(
+    entry: dict,
+    reference: dict,
+    method: str,
+    *,
+    mean_tol_sd: float = MEAN_TOL_SD,
+    sd_ratio_range: tuple[float, float] = SD_RATIO_RANGE,
+) -> Verdict:
     """Verdict for one summary.json method entry against the reference's entry."""
     e, r = entry.get("EI", {}), reference.get("EI", {})
-    if not all(_finite(v) for v in (e.get("mean"), e.get("sd"), r.get("mean"), r.get("sd"))) or r["sd"] <= 0:
-        return Verdict(method, None, None, None, ("the reference or this method has no finite mean and sd",))
+    if (
+        not all(_finite(v) for v in (e.get("mean"), e.get("sd"), r.get("mean"), r.get("sd")))
+        or r["sd"] <= 0
+    ):
+        return Verdict(
+            method, None, None, None, ("the reference or this method has no finite mean and sd",)
+        )
     d = (e["mean"] - r["mean"]) / r["sd"]
     ratio = e["sd"] / r["sd"]
     reasons = []
@@ -95,9 +108,13 @@ def caveats(methods: dict, reference: str = REFERENCE_KEY) -> list[str]:
         return out
     conv = (ref.get("diagnostics") or {}).get("converged")
     if conv is False:
-        out.append("The modal reference did not meet its convergence criteria (R-hat, ESS): "
-                   "its own intervals, and this verdict, are approximate.")
+        out.append(
+            "The modal reference did not meet its convergence criteria (R-hat, ESS): "
+            "its own intervals, and this verdict, are approximate."
+        )
     if ref.get("identified") is False:
-        out.append("The modal reference finds EI not identified by these data: "
-                   "agreement then only means both methods return (roughly) the prior.")
+        out.append(
+            "The modal reference finds EI not identified by these data: "
+            "agreement then only means both methods return (roughly) the prior."
+        )
     return out

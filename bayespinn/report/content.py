@@ -16,6 +16,7 @@ from .table5 import table5_rows
 from .units import (
     DISPLAY,
     REFERENCE_KEY,
+    covers,
     ei_decimals,
     fmt,
     fmt_EI,
@@ -32,8 +33,11 @@ NOT_IDENTIFIED = "EI is not identified by these data"
 
 def title(summary: dict) -> str:
     snr = snr_label(summary.get("snr_db"))
-    where = "unknown SNR (measured data)" if summary.get("truth") is None else (
-        "clean data" if summary.get("snr_db") is None else f"SNR {snr} dB")
+    where = (
+        "unknown SNR (measured data)"
+        if summary.get("truth") is None
+        else ("clean data" if summary.get("snr_db") is None else f"SNR {snr} dB")
+    )
     return f"bayespinn report: {summary['case']} case, {where}"
 
 
@@ -42,7 +46,11 @@ def not_identified(methods: dict) -> list[tuple[str, str]]:
     out = []
     for key, m in methods.items():
         if m.get("identified") is False:
-            why = [str(v) for k, v in m.items() if "identif" in k and k != "identified" and isinstance(v, str)]
+            why = [
+                str(v)
+                for k, v in m.items()
+                if "identif" in k and k != "identified" and isinstance(v, str)
+            ]
             out.append((key, " ".join(why)))
     return out
 
@@ -51,12 +59,23 @@ def alerts(summary: dict) -> list[Block]:
     """The statements that go on top: identifiability, unconverged samplers, disagreement."""
     out: list[Block] = []
     for key, why in not_identified(summary["methods"]):
-        out.append(Alert(f"**{NOT_IDENTIFIED}** ({name(key)}). " + (why or
-                         "The posterior of EI is essentially its prior: its intervals are not a measurement.")))
+        out.append(
+            Alert(
+                f"**{NOT_IDENTIFIED}** ({name(key)}). "
+                + (
+                    why
+                    or "The posterior of EI is essentially its prior: its intervals are not a measurement."
+                )
+            )
+        )
     for key, m in summary["methods"].items():
         if (m.get("diagnostics") or {}).get("converged") is False:
-            out.append(Alert(f"{name(key)} did not meet its convergence criteria (R-hat, ESS): "
-                             "its intervals are approximate. See Diagnostics."))
+            out.append(
+                Alert(
+                    f"{name(key)} did not meet its convergence criteria (R-hat, ESS): "
+                    "its intervals are approximate. See Diagnostics."
+                )
+            )
     for v in agreement(summary["methods"]):
         if v.agrees is False:
             out.append(Alert(v.sentence()))
@@ -73,45 +92,103 @@ def data_section(result, cfg: Config) -> list[Block]:
         ("case", s["case"]),
         ("observations", f"{len(data)} ({', '.join(sorted(set(data.kind.tolist())))})"),
         ("positions x", f"{data.x.min():.3f} to {data.x.max():.3f} m (span {cfg.beam.length:g} m)"),
-        ("times t", f"{data.t.min():.3f} to {data.t.max():.3f} s (crossing T = {cfg.duration:.3f} s)"),
-        (f"values ({unit})", f"min {v.min() * f:.4g}, max {v.max() * f:.4g}, rms {np.sqrt(np.mean(v**2)) * f:.4g}"),
+        (
+            "times t",
+            f"{data.t.min():.3f} to {data.t.max():.3f} s (crossing T = {cfg.duration:.3f} s)",
+        ),
+        (
+            f"values ({unit})",
+            f"min {v.min() * f:.4g}, max {v.max() * f:.4g}, rms {np.sqrt(np.mean(v**2)) * f:.4g}",
+        ),
     ]
     if data.is_strain.any():
         names, counts = np.unique(data.sensor[data.is_strain], return_counts=True)
-        rows.append(("gauges", ", ".join(f"{n or 'unnamed'} ({c})" for n, c in zip(names, counts, strict=True))))
+        rows.append(
+            (
+                "gauges",
+                ", ".join(f"{n or 'unnamed'} ({c})" for n, c in zip(names, counts, strict=True)),
+            )
+        )
     fs, su = sigma_unit(s["case"])
     if truth is None:
         rows += [("true EI", "unknown (measured data)"), ("SNR", "unknown (measured data)")]
     else:
         rows += [
-            ("nominal SNR", "clean (σ = 0)" if s.get("snr_db") is None else f"{snr_label(s['snr_db'])} dB"),
-            ("realised SNR", f"{s['realised_snr_db']:.2f} dB" if s.get("realised_snr_db") is not None else "n/a"),
+            (
+                "nominal SNR",
+                "clean (σ = 0)" if s.get("snr_db") is None else f"{snr_label(s['snr_db'])} dB",
+            ),
+            (
+                "realised SNR",
+                f"{s['realised_snr_db']:.2f} dB" if s.get("realised_snr_db") is not None else "n/a",
+            ),
             ("true EI", f"{fmt_EI(truth['EI'])} GN m²"),
             ("true noise sd σ", f"{truth['sigma'] * fs:.4g} {su}"),
         ]
     rows += [("seed", str(s["seed"])), ("profile", f"`{s['profile']}`")]
     out: list[Block] = [Heading("Data"), table(("item", "value"), rows)]
     if truth is None:
-        out.append(Paragraph("Measured data: **the truth (EI) and the SNR are unknown**, so no errors against "
-                             "the truth and no truth lines are reported; the intervals are the result."))
+        out.append(
+            Paragraph(
+                "Measured data: **the truth (EI) and the SNR are unknown**, so no errors against "
+                "the truth and no truth lines are reported; the intervals are the result."
+            )
+        )
     return out
 
 
 def ei_table(summary: dict) -> list[Block]:
     truth = summary.get("truth")
+    t_EI = truth.get("EI") if truth else None
     rows = []
     for key, m in summary["methods"].items():
         e = m["EI"]
-        err = fmt_pct(e["rel_error_pct"]) if e.get("rel_error_pct") is not None else "n/a (truth unknown)"
-        flag = f" ({NOT_IDENTIFIED.lower()})" if m.get("identified") is False else ""
+        err = (
+            fmt_pct(e["rel_error_pct"])
+            if e.get("rel_error_pct") is not None
+            else "n/a (truth unknown)"
+        )
+        flag = " (EI not identified)" if m.get("identified") is False else ""
         d = ei_decimals(e["ci90"][1] - e["ci90"][0])
-        rows.append((name(key) + flag, fmt_EI(e["mean"], d), fmt_EI_sd(e["sd"]), fmt_EI(e.get("median"), d),
-                     fmt_EI_interval(e["ci90"]), fmt_EI_interval(e["ci95"]), err))
-    cap = ("Relative error = 100 (mean - truth) / truth." if truth else
-           "Truth unknown (measured data): no relative errors.")
-    return [Heading("Flexural rigidity EI"),
-            table(("method", "mean (GN m²)", "sd (GN m²)", "median", "90 % interval", "95 % interval",
-                   "rel. error"), rows, cap)]
+        rows.append(
+            (
+                name(key) + flag,
+                fmt_EI(e["mean"], d),
+                fmt_EI_sd(e["sd"]),
+                fmt_EI(e.get("median"), d),
+                fmt_EI_interval(e["ci90"], d),
+                fmt_EI_interval(e["ci95"], d),
+                err,
+                f"{covers(e['ci90'], t_EI)} / {covers(e['ci95'], t_EI)}",
+            )
+        )
+    cap = (
+        "Relative error = 100 (mean - truth) / truth; 'truth inside': whether the 90 % / 95 % "
+        "interval contains the true EI."
+        if truth
+        else "Truth unknown (measured data): no relative errors."
+    )
+    return [
+        Heading("Flexural rigidity EI"),
+        table(
+            (
+                "method",
+                "mean (GN m²)",
+                "sd (GN m²)",
+                "median",
+                "90 % interval",
+                "95 % interval",
+                "rel. error",
+                "truth inside 90 / 95 %",
+            ),
+            rows,
+            cap,
+        ),
+    ]
+
+
+def _scaled(v, f: float) -> float | None:
+    return None if v is None else float(v) * f
 
 
 def sigma_table(summary: dict) -> list[Block]:
@@ -121,14 +198,40 @@ def sigma_table(summary: dict) -> list[Block]:
     rows = []
     for key, m in summary["methods"].items():
         s = m["sigma"]
-        err = f"{100 * (s['mean'] - ts) / ts:+.1f} %" if ts else "n/a"
-        rows.append((name(key), fmt(s["mean"] * f), fmt(s["sd"] * f, ".3g"), fmt_interval(s["ci90"], f),
-                     fmt_interval(s["ci95"], f), err))
-    cap = (f"True σ = {ts * f:.4g} {unit}." if ts else
-           "Clean data: the true σ is 0." if truth else "Truth unknown (measured data).")
-    return [Heading("Measurement noise σ"),
-            table(("method", f"mean ({unit})", f"sd ({unit})", f"90 % interval ({unit})",
-                   f"95 % interval ({unit})", "rel. error"), rows, cap)]
+        mean, sd = _scaled(s.get("mean"), f), _scaled(s.get("sd"), f)
+        err = f"{100 * (s['mean'] - ts) / ts:+.1f} %" if ts and mean is not None else "n/a"
+        rows.append(
+            (
+                name(key),
+                fmt(mean),
+                fmt(sd, ".3g"),
+                fmt_interval(s["ci90"], f),
+                fmt_interval(s["ci95"], f),
+                err,
+            )
+        )
+    cap = (
+        f"True σ = {ts * f:.4g} {unit}."
+        if ts
+        else "Clean data: the true σ is 0."
+        if truth
+        else "Truth unknown (measured data)."
+    )
+    return [
+        Heading("Measurement noise σ"),
+        table(
+            (
+                "method",
+                f"mean ({unit})",
+                f"sd ({unit})",
+                f"90 % interval ({unit})",
+                f"95 % interval ({unit})",
+                "rel. error",
+            ),
+            rows,
+            cap,
+        ),
+    ]
 
 
 def comparison_section(summary: dict) -> list[Block]:
@@ -148,13 +251,34 @@ def comparison_section(summary: dict) -> list[Block]:
             d = fmt(v.mean_diff_sd, "+.2f")
             r = fmt(v.sd_ratio, ".2f")
             lab = v.label
-        rows.append((name(key), fmt_EI(e["mean"], ei_decimals(width)), fmt_EI_interval(e["ci90"]),
-                     fmt_EI_sd(width), d, r, lab))
+        rows.append(
+            (
+                name(key),
+                fmt_EI(e["mean"], ei_decimals(width)),
+                fmt_EI_interval(e["ci90"]),
+                fmt_EI_sd(width),
+                d,
+                r,
+                lab,
+            )
+        )
     lo, hi = SD_RATIO_RANGE
-    out.append(table(("method", "EI mean (GN m²)", "90 % interval", "90 % width", "Δmean / reference sd",
-                      "sd / reference sd", "verdict"), rows,
-                     f"A PINN posterior is flagged when |Δmean| > {MEAN_TOL_SD:g} reference sd or its sd ratio "
-                     f"is outside [{lo:g}, {hi:g}]."))
+    out.append(
+        table(
+            (
+                "method",
+                "EI mean (GN m²)",
+                "90 % interval",
+                "90 % width",
+                "Δmean / reference sd",
+                "sd / reference sd",
+                "verdict",
+            ),
+            rows,
+            f"A PINN posterior is flagged when |Δmean| > {MEAN_TOL_SD:g} reference sd or its sd ratio "
+            f"is outside [{lo:g}, {hi:g}].",
+        )
+    )
     if not verdicts:
         only = "Only the modal reference ran" if REFERENCE_KEY in methods else "No PINN method ran"
         out.append(Paragraph(f"{only}: no PINN posterior to check against the reference."))
@@ -174,7 +298,9 @@ def _other_diag(d: dict) -> str:
     for k, v in d.items():
         if k in ("rhat", "ess_bulk", "ess_tail", "converged") or isinstance(v, dict | list):
             continue
-        parts.append(f"{k} = {fmt(v) if isinstance(v, int | float) and not isinstance(v, bool) else v}")
+        parts.append(
+            f"{k} = {fmt(v) if isinstance(v, int | float) and not isinstance(v, bool) else v}"
+        )
     return "; ".join(parts) or "-"
 
 
@@ -182,11 +308,24 @@ def diagnostics_section(summary: dict) -> list[Block]:
     rows = []
     for key, m in summary["methods"].items():
         d = m.get("diagnostics") or {}
-        rows.append((name(key), fmt(d.get("rhat"), ".4f"), fmt(d.get("ess_bulk"), ".0f"), fmt(d.get("ess_tail"), ".0f"),
-                     str(d.get("converged", "n/a")), _other_diag(d)))
-    return [Heading("Diagnostics"),
-            table(("method", "R-hat", "bulk ESS", "tail ESS", "converged", "other"), rows,
-                  "R-hat and ESS from ArviZ (rank-normalised split R-hat); n/a where a method has none.")]
+        rows.append(
+            (
+                name(key),
+                fmt(d.get("rhat"), ".4f"),
+                fmt(d.get("ess_bulk"), ".0f"),
+                fmt(d.get("ess_tail"), ".0f"),
+                str(d.get("converged", "n/a")),
+                _other_diag(d),
+            )
+        )
+    return [
+        Heading("Diagnostics"),
+        table(
+            ("method", "R-hat", "bulk ESS", "tail ESS", "converged", "other"),
+            rows,
+            "R-hat and ESS from ArviZ (rank-normalised split R-hat); n/a where a method has none.",
+        ),
+    ]
 
 
 def runtime_section(result) -> list[Block]:
@@ -213,12 +352,15 @@ def table5_section(table5s: list[dict], notes: list[str]) -> list[Block]:
         return []
     out: list[Block] = [Heading("Responses against the FE truth (paper Table 5 with uncertainty)")]
     if table5s:
-        out.append(Paragraph(
-            "Posterior predictive mean of the noise-free response against the finite-element truth at "
-            f"{table5s[0]['n_points']} interior points of the span. RMSE in mm (deflection u) and kN m "
-            "(moment M), with the 90 % interval of the RMSE of single posterior draws; CV = RMSE / "
-            "mean|truth| x 100; NMB = sum(pred - truth) / sum(truth) x 100; 'band covers FE': share of "
-            "the points where the 90 % credible band contains the truth."))
+        out.append(
+            Paragraph(
+                "Posterior predictive mean of the noise-free response against the finite-element truth at "
+                f"{table5s[0]['n_points']} interior points of the span. RMSE in mm (deflection u) and kN m "
+                "(moment M), with the 90 % interval of the RMSE of single posterior draws; CV = RMSE / "
+                "mean|truth| x 100; NMB = sum(pred - truth) / sum(truth) x 100; 'band covers FE': share of "
+                "the points where the 90 % credible band contains the truth."
+            )
+        )
     for t5 in table5s:
         out.append(table(T5_HEADER, table5_rows(t5), name(t5["method"])))
     if notes:
@@ -253,20 +395,33 @@ def manifest_section(manifest: dict, truth_known: bool = True) -> list[Block]:
     ]
     versions = manifest.get("versions") or {}
     timings = manifest.get("timings_s") or {}
-    out: list[Block] = [Heading("Manifest"),
-                        Paragraph("The same as `manifest.json`: what produced this report."),
-                        BulletList(tuple(items)),
-                        Heading("Versions", 3),
-                        table(("package", "version"), [(k, v or "not installed") for k, v in versions.items()])]
+    out: list[Block] = [
+        Heading("Manifest"),
+        Paragraph("The same as `manifest.json`: what produced this report."),
+        BulletList(tuple(items)),
+        Heading("Versions", 3),
+        table(("package", "version"), [(k, v or "not installed") for k, v in versions.items()]),
+    ]
     if timings:
-        out += [Heading("Timings", 3), table(("step", "seconds"), [(k, fmt(v, ".2f")) for k, v in timings.items()])]
-    out += [Heading("Resolved configuration (SI units)", 3),
-            Code(json.dumps(_jsonable(manifest.get("config", {})), indent=2), "json")]
+        out += [
+            Heading("Timings", 3),
+            table(("step", "seconds"), [(k, fmt(v, ".2f")) for k, v in timings.items()]),
+        ]
+    out += [
+        Heading("Resolved configuration (SI units)", 3),
+        Code(json.dumps(_jsonable(manifest.get("config", {})), indent=2), "json"),
+    ]
     return out
 
 
-def run_document(result, cfg: Config, figures: list[FigureFile] = (), figure_notes: list[str] = (),
-                 table5s: list[dict] = (), table5_notes: list[str] = ()) -> list[Block]:
+def run_document(
+    result,
+    cfg: Config,
+    figures: list[FigureFile] = (),
+    figure_notes: list[str] = (),
+    table5s: list[dict] = (),
+    table5_notes: list[str] = (),
+) -> list[Block]:
     """Every block of a run report, in order."""
     s = result.summary
     blocks: list[Block] = [Heading(title(s), 1)]

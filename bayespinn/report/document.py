@@ -60,4 +60,6 @@ Block = Heading | Paragraph | Alert | Table | Figure | Code | BulletList
 
 def table(header, rows, caption: str = "") -> Table:
     """A Table from any iterables of cells (converted to str)."""
-    return Table(tuple(str(h) for h in header), tuple(tuple(str(c) for c in r) for r in rows), caption)
+    return Table(
+        tuple(str(h) for h in header), tuple(tuple(str(c) for c in r) for r in rows), caption
+    )

@@ -106,7 +106,10 @@ def posteriors_figure(result, cfg: Config, path: Path, rng: np.random.Generator)
             if tv is not None and np.isfinite(tv) and tv > 0:
                 ax.axvline(tv * f, label="truth", **TRUTH_STYLE)
             ax.set_yticks([])
-            ax.set_title(f"{name(key)}: {var} mean {d.mean():.4g}, 90 % [{lo:.4g}, {hi:.4g}] {unit}", fontsize=9)
+            ax.set_title(
+                f"{name(key)}: {var} mean {d.mean():.4g}, 90 % [{lo:.4g}, {hi:.4g}] {unit}",
+                fontsize=9,
+            )
             if i == len(posts) - 1:
                 ax.set_xlabel(f"{'EI' if var == 'EI' else 'noise sd σ'} ({unit})")
     if truth is not None:
@@ -114,10 +117,14 @@ def posteriors_figure(result, cfg: Config, path: Path, rng: np.random.Generator)
     fig.suptitle(f"Posteriors of EI and σ ({_subtitle(result)})", fontsize=11)
     _save(fig, path)
     if truth is None:
-        return ("Posterior histograms and kernel density estimates per method; dotted lines and shading: "
-                "equal-tailed 90 % credible interval. Measured data: the truth is unknown.")
-    return ("Posterior histograms and kernel density estimates per method; dotted lines and shading: "
-            "equal-tailed 90 % credible interval; dashed black line: the true value.")
+        return (
+            "Posterior histograms and kernel density estimates per method; dotted lines and shading: "
+            "equal-tailed 90 % credible interval. Measured data: the truth is unknown."
+        )
+    return (
+        "Posterior histograms and kernel density estimates per method; dotted lines and shading: "
+        "equal-tailed 90 % credible interval; dashed black line: the true value."
+    )
 
 
 # ---------------------------------------------------------------------------------------------- (b)
@@ -125,10 +132,20 @@ def _gauges_in_data(data) -> list[tuple[str, float, float, np.ndarray]]:
     """(label, x, y, row mask) for each distinct strain gauge in the data."""
     s = data.is_strain
     out = []
-    keys = sorted({(data.sensor[i], round(float(data.x[i]), 6), round(float(data.y[i]), 6)) for i in np.flatnonzero(s)},
-                  key=lambda k: (k[0], k[1], k[2]))
+    keys = sorted(
+        {
+            (data.sensor[i], round(float(data.x[i]), 6), round(float(data.y[i]), 6))
+            for i in np.flatnonzero(s)
+        },
+        key=lambda k: (k[0], k[1], k[2]),
+    )
     for nm, x, y in keys:
-        m = s & (data.sensor == nm) & np.isclose(data.x, x, atol=1e-6) & np.isclose(data.y, y, atol=1e-6)
+        m = (
+            s
+            & (data.sensor == nm)
+            & np.isclose(data.x, x, atol=1e-6)
+            & np.isclose(data.y, y, atol=1e-6)
+        )
         out.append((nm or f"x = {x:.2f} m, y = {y:+.3f} m", x, y, m))
     return out
 
@@ -151,20 +168,27 @@ def data_fit_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -
         lo, hi = pv.predictive_band(resp, p.sigma, rng)
         inside = float(np.mean((data.value >= lo) & (data.value <= hi)))
         y = data.value * f
-        ax.vlines(y, lo * f, hi * f, color=_color(key), alpha=0.6, lw=0.8, label="90 % predictive band")
+        ax.vlines(
+            y, lo * f, hi * f, color=_color(key), alpha=0.6, lw=0.8, label="90 % predictive band"
+        )
         ax.plot(y, mean * f, "o", ms=3, color=_color(key), label="posterior mean response")
         lim = [min(y.min(), (lo * f).min()), max(y.max(), (hi * f).max())]
         ax.plot(lim, lim, color="black", lw=1, label="measured = predicted")
         ax.set_xlabel(f"measured deflection ({unit}, + down)")
         ax.set_ylabel(f"predicted deflection ({unit})")
-        ax.set_title(f"{name(key)}: {100 * inside:.0f} % of {len(data)} points in the 90 % band", fontsize=9)
+        ax.set_title(
+            f"{name(key)}: {100 * inside:.0f} % of {len(data)} points in the 90 % band", fontsize=9
+        )
         ax.legend(fontsize=8, loc="upper left")
         notes.append(f"{name(key)}: {100 * inside:.1f} % of the points inside")
     fig.suptitle(f"Data against the posterior predictive ({_subtitle(result)})", fontsize=11)
     _save(fig, path)
-    return ("Measured against predicted deflection; bars: 90 % posterior predictive band (response plus "
-            "measurement noise, σ from its posterior). About 90 % of the points should fall inside: "
-            + "; ".join(notes) + ".")
+    return (
+        "Measured against predicted deflection; bars: 90 % posterior predictive band (response plus "
+        "measurement noise, σ from its posterior). About 90 % of the points should fall inside: "
+        + "; ".join(notes)
+        + "."
+    )
 
 
 def _strain_fit(result, posts, path: Path, rng: np.random.Generator) -> str:
@@ -186,19 +210,34 @@ def _strain_fit(result, posts, path: Path, rng: np.random.Generator) -> str:
             lo, hi = pv.predictive_band(resp, p.sigma, rng)
             hits[key][0] += int(np.sum((v >= lo) & (v <= hi)))
             hits[key][1] += v.size
-            ax.fill_between(t, lo * f, hi * f, color=_color(key), alpha=0.25, lw=0, label=f"{name(key)} 90 % band")
+            ax.fill_between(
+                t,
+                lo * f,
+                hi * f,
+                color=_color(key),
+                alpha=0.25,
+                lw=0,
+                label=f"{name(key)} 90 % band",
+            )
             ax.plot(t, mean * f, color=_color(key), lw=1.2)
         ax.set_title(f"{label} (x = {x:.2f} m, {'bottom' if y > 0 else 'top'} flange)", fontsize=9)
         ax.set_xlabel("time t (s)")
         ax.set_ylabel(f"strain ({unit})")
-    for ax in axes[len(gauges):]:
+    for ax in axes[len(gauges) :]:
         ax.set_visible(False)
     axes[0].legend(fontsize=7, loc="best")
     fig.suptitle(f"Strain data against the posterior predictive ({_subtitle(result)})", fontsize=11)
     _save(fig, path)
-    notes = "; ".join(f"{name(k)}: {100 * h / max(n, 1):.1f} % of the samples inside" for k, (h, n) in hits.items())
-    return ("Strain time history at each gauge of the data; shading: 90 % posterior predictive band "
-            "(response plus noise), line: posterior mean of the noise-free response. About 90 % should fall inside: " + notes + ".")
+    notes = "; ".join(
+        f"{name(k)}: {100 * h / max(n, 1):.1f} % of the samples inside"
+        for k, (h, n) in hits.items()
+    )
+    return (
+        "Strain time history at each gauge of the data; shading: 90 % posterior predictive band "
+        "(response plus noise), line: posterior mean of the noise-free response. About 90 % should fall inside: "
+        + notes
+        + "."
+    )
 
 
 # ---------------------------------------------------------------------------------------------- (c)
@@ -218,24 +257,44 @@ def span_profiles_figure(result, cfg: Config, path: Path, rng: np.random.Generat
             ax = axes[i, j]
             for key, p in posts.items():
                 mean, lo, hi = pv.band(pv.predict(p, x, np.full(x.size, t), q, rng))
-                ax.fill_between(x, lo * f, hi * f, color=_color(key), alpha=0.25, lw=0, label=f"{name(key)} 90 % band")
+                ax.fill_between(
+                    x,
+                    lo * f,
+                    hi * f,
+                    color=_color(key),
+                    alpha=0.25,
+                    lw=0,
+                    label=f"{name(key)} 90 % band",
+                )
                 ax.plot(x, mean * f, color=_color(key), lw=1.3, label=f"{name(key)} mean")
             if result.truth is not None:
-                ax.plot(x, pv.fe_truth(cfg, x, np.full(x.size, t), q) * f, label="FE truth", **TRUTH_STYLE)
+                ax.plot(
+                    x,
+                    pv.fe_truth(cfg, x, np.full(x.size, t), q) * f,
+                    label="FE truth",
+                    **TRUTH_STYLE,
+                )
             if q == "deflection":
                 ax.invert_yaxis()  # positive down: the girder sags downwards on the plot
                 ax.set_title(f"t = {t:.2f} s", fontsize=10)
-            ax.set_ylabel(f"{'deflection u' if q == 'deflection' else 'moment M'} ({unit}{', + down' if q == 'deflection' else ', sagging +'})")
+            ax.set_ylabel(
+                f"{'deflection u' if q == 'deflection' else 'moment M'} ({unit}{', + down' if q == 'deflection' else ', sagging +'})"
+            )
             if i == 1:
                 ax.set_xlabel("position along the span x (m)")
     axes[0, 0].legend(fontsize=7, loc="best")
     fig.suptitle(f"Deflection and moment along the span ({_subtitle(result)})", fontsize=11)
     _save(fig, path)
     shown = ", ".join(f"{t:.2f}" for t in times)
-    truth = ("dashed black: the finite-element truth." if result.truth is not None
-             else "measured data: no FE truth is shown (the true EI is unknown).")
-    return (f"Deflection (top) and bending moment (bottom) along the span at t = {shown} s (paper Fig. 4); "
-            f"shading: 90 % credible band of the noise-free response, line: posterior mean; {truth}")
+    truth = (
+        "dashed black: the finite-element truth."
+        if result.truth is not None
+        else "measured data: no FE truth is shown (the true EI is unknown)."
+    )
+    return (
+        f"Deflection (top) and bending moment (bottom) along the span at t = {shown} s (paper Fig. 4); "
+        f"shading: 90 % credible band of the noise-free response, line: posterior mean; {truth}"
+    )
 
 
 # ---------------------------------------------------------------------------------------------- (d)
@@ -279,38 +338,71 @@ def gauges_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> 
     held_out = []
     for ax, (s, m) in zip(axes, gauges, strict=False):
         if m.any():
-            ax.plot(data.t[m], data.value[m] * f, ".", ms=2, color="0.45", label="measured (used for training)")
+            ax.plot(
+                data.t[m],
+                data.value[m] * f,
+                ".",
+                ms=2,
+                color="0.45",
+                label="measured (used for training)",
+            )
         else:
             held_out.append(s.name)
         for key, p in posts.items():
             mean, lo, hi = pv.band(pv.predict(p, np.full(t.size, s.x), t, "strain", rng, y=s.y))
-            ax.fill_between(t, lo * f, hi * f, color=_color(key), alpha=0.25, lw=0, label=f"{name(key)} 90 % band")
+            ax.fill_between(
+                t,
+                lo * f,
+                hi * f,
+                color=_color(key),
+                alpha=0.25,
+                lw=0,
+                label=f"{name(key)} 90 % band",
+            )
             ax.plot(t, mean * f, color=_color(key), lw=1.2, label=f"{name(key)} mean")
         if result.truth is not None:
-            ax.plot(t, pv.fe_truth(cfg, np.full(t.size, s.x), t, "strain", y=s.y) * f, label="FE truth", **TRUTH_STYLE)
+            ax.plot(
+                t,
+                pv.fe_truth(cfg, np.full(t.size, s.x), t, "strain", y=s.y) * f,
+                label="FE truth",
+                **TRUTH_STYLE,
+            )
         flange = "bottom" if s.y > 0 else "top"
         tag = "" if m.any() else " (not used for training)"
-        ax.set_title(f"{s.name}: x = {s.x:.2f} m, {flange} flange{tag}", fontsize=9,
-                     color="black" if m.any() else "#a04000")
+        ax.set_title(
+            f"{s.name}: x = {s.x:.2f} m, {flange} flange{tag}",
+            fontsize=9,
+            color="black" if m.any() else "#a04000",
+        )
         ax.set_xlabel("time t (s)")
         ax.set_ylabel(f"strain ({unit})")
         ax.legend(fontsize=7, loc="best")
-    for ax in axes[len(gauges):]:
+    for ax in axes[len(gauges) :]:
         ax.set_visible(False)
     fig.suptitle(f"Strain histories at the gauges ({_subtitle(result)})", fontsize=11)
     _save(fig, path)
-    held = (f"Gauges not used for training (a genuine out-of-sample check): {', '.join(held_out)}."
-            if held_out else "Every gauge shown was used for training.")
-    return ("Strain time histories at each gauge (paper Fig. 7); shading: 90 % credible band of the "
-            "noise-free strain, line: posterior mean"
-            + ("; dashed black: the finite-element truth. " if result.truth is not None else ". ") + held)
+    held = (
+        f"Gauges not used for training (a genuine out-of-sample check): {', '.join(held_out)}."
+        if held_out
+        else "Every gauge shown was used for training."
+    )
+    return (
+        "Strain time histories at each gauge (paper Fig. 7); shading: 90 % credible band of the "
+        "noise-free strain, line: posterior mean"
+        + ("; dashed black: the finite-element truth. " if result.truth is not None else ". ")
+        + held
+    )
 
 
 #: (file name, title, function), in report order
 FIGURES = (
     ("fig_posteriors.png", "Posteriors of EI and σ", posteriors_figure),
     ("fig_data_fit.png", "Data against the posterior predictive", data_fit_figure),
-    ("fig_span_profiles.png", "Deflection and moment along the span (paper Fig. 4)", span_profiles_figure),
+    (
+        "fig_span_profiles.png",
+        "Deflection and moment along the span (paper Fig. 4)",
+        span_profiles_figure,
+    ),
     ("fig_gauges.png", "Strain histories at the gauges (paper Fig. 7)", gauges_figure),
 )
 
@@ -325,8 +417,10 @@ def make_figures(result, cfg: Config, folder: str | Path) -> tuple[list[FigureFi
     written, notes = [], []
     skipped_predictor = [name(k) for k, p in result.posteriors.items() if p.predictor is None]
     if skipped_predictor:
-        notes.append(f"No posterior predictive for {', '.join(skipped_predictor)} (no predictor): "
-                     "left out of the response figures.")
+        notes.append(
+            f"No posterior predictive for {', '.join(skipped_predictor)} (no predictor): "
+            "left out of the response figures."
+        )
     seed = result.summary.get("seed", 0)
     for fname, title, func in FIGURES:
         try:
@@ -337,8 +431,12 @@ def make_figures(result, cfg: Config, folder: str | Path) -> tuple[list[FigureFi
             if fname != "fig_gauges.png" or "deflection data" not in str(why):
                 notes.append(f"{title}: not drawn ({why}).")
         except Exception as exc:  # a figure must never lose the report
-            log.warning("warning: figure %s failed and is left out of the report: %s: %s",
-                        fname, type(exc).__name__, exc)
+            log.warning(
+                "warning: figure %s failed and is left out of the report: %s: %s",
+                fname,
+                type(exc).__name__,
+                exc,
+            )
             notes.append(f"{title}: left out, drawing it failed ({type(exc).__name__}: {exc}).")
             (folder / fname).unlink(missing_ok=True)
     return written, notes

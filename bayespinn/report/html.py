@@ -95,7 +95,7 @@ def render_html(blocks: list[Block], folder: str | Path, title: str) -> str:
         else:  # pragma: no cover - the Block union is closed
             raise TypeError(f"unknown report block {type(b).__name__}")
     return (
-        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         f"<title>{html.escape(title)}</title>\n<style>{CSS}</style>\n</head>\n<body>\n"
         + "\n".join(body)

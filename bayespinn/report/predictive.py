@@ -72,8 +72,13 @@ def add_noise(draws: np.ndarray, sigma_draws: np.ndarray, rng: np.random.Generat
     return draws + s[:, None] * rng.standard_normal(draws.shape)
 
 
-def predictive_band(resp: np.ndarray, sigma_draws: np.ndarray, rng: np.random.Generator,
-                    level: float = LEVEL, min_rows: int = N_DRAWS) -> tuple[np.ndarray, np.ndarray]:
+def predictive_band(
+    resp: np.ndarray,
+    sigma_draws: np.ndarray,
+    rng: np.random.Generator,
+    level: float = LEVEL,
+    min_rows: int = N_DRAWS,
+) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) of the posterior predictive band: response draws (n, P) plus noise. With few
     response draws (a small ensemble) each is repeated, with fresh noise, to at least `min_rows` rows."""
     reps = max(1, -(-min_rows // max(resp.shape[0], 1)))

@@ -83,14 +83,29 @@ def table5(
             draws = pv.predict(post, x, tt, q, rng, n_draws)
             row[q] = _metrics(draws, pv.fe_truth(cfg, x, tt, q), level)
         rows.append(row)
-    return {"schema": "bayespinn.table5/1", "method": method, "level": level, "n_points": n_points,
-            "n_draws": n_draws, "times": [r["t"] for r in rows], "rows": rows}
+    return {
+        "schema": "bayespinn.table5/1",
+        "method": method,
+        "level": level,
+        "n_points": n_points,
+        "n_draws": n_draws,
+        "times": [r["t"] for r in rows],
+        "rows": rows,
+    }
 
 
 HEADER = (
     "t (s)",
-    "u RMSE (mm)", "u RMSE 90 % over draws", "u CV %", "u NMB %", "u band covers FE",
-    "M RMSE (kN m)", "M RMSE 90 % over draws", "M CV %", "M NMB %", "M band covers FE",
+    "u RMSE (mm)",
+    "u RMSE 90 % over draws",
+    "u CV %",
+    "u NMB %",
+    "u band covers FE",
+    "M RMSE (kN m)",
+    "M RMSE 90 % over draws",
+    "M CV %",
+    "M NMB %",
+    "M band covers FE",
 )
 
 

@@ -44,11 +44,11 @@ def fmt_EI_sd(v: float | None) -> str:
     return fmt(None if v is None else v / 1e9, ".3g")
 
 
-def fmt_EI_interval(ci) -> str:
-    """'[lo, hi]' of an EI interval [N m^2] in GN m^2, with enough decimals to tell lo from hi."""
+def fmt_EI_interval(ci, decimals: int | None = None) -> str:
+    """'[lo, hi]' of an EI interval [N m^2] in GN m^2, by default with enough decimals to tell lo from hi."""
     if not ci or len(ci) != 2 or ci[0] is None or ci[1] is None:
         return "n/a"
-    d = ei_decimals(ci[1] - ci[0])
+    d = ei_decimals(ci[1] - ci[0]) if decimals is None else decimals
     return f"[{fmt_EI(ci[0], d)}, {fmt_EI(ci[1], d)}]"
 
 
@@ -80,3 +80,10 @@ def fmt_interval(ci, factor: float = 1.0, spec: str = ".4g") -> str:
     if not ci or len(ci) != 2 or ci[0] is None or ci[1] is None:
         return "n/a"
     return f"[{fmt(ci[0] * factor, spec)}, {fmt(ci[1] * factor, spec)}]"
+
+
+def covers(ci, truth: float | None) -> str:
+    """'yes' / 'no' whether an interval [lo, hi] contains the truth; 'n/a' without one."""
+    if truth is None or not ci or ci[0] is None or ci[1] is None:
+        return "n/a"
+    return "yes" if ci[0] <= truth <= ci[1] else "**no**"

@@ -26,12 +26,19 @@ def run_table5s(result, cfg: Config) -> tuple[list[dict], list[str]]:
         try:
             out.append(table5(result, cfg, key))
         except Exception as exc:  # the table is an extra: never lose the report for it
-            log.warning("warning: Table 5 for %s failed and is left out: %s: %s", key, type(exc).__name__, exc)
+            log.warning(
+                "warning: Table 5 for %s failed and is left out: %s: %s",
+                key,
+                type(exc).__name__,
+                exc,
+            )
             notes.append(f"Table 5 for {key} left out: {type(exc).__name__}: {exc}.")
     return out, notes
 
 
-def write_reports(result, cfg: Config, folder: str | Path, *, figures: bool = True) -> dict[str, Path]:
+def write_reports(
+    result, cfg: Config, folder: str | Path, *, figures: bool = True
+) -> dict[str, Path]:
     """Write the figures (PNG), report.md and report.html into `folder`.
 
     A figure or table that fails is logged as a warning and left out, with a note in the reports.

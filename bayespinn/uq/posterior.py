@@ -122,6 +122,9 @@ class Posterior:
         os.close(fd)
         try:
             self.to_inference_data().to_netcdf(tmp, engine="h5netcdf")
+            from ..data.measurements import _FILE_MODE
+
+            os.chmod(tmp, _FILE_MODE)
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
