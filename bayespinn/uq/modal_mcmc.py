@@ -129,6 +129,16 @@ def choose_modes(cfg: Config, data: Measurements, EI: float, sigma: float, start
         n *= 2
 
 
+def _prior_only(ei_prior: EIPrior, seed, t0: float) -> Posterior:
+    """No measurements: the posterior is the prior (exact draws); sigma is not estimable (NaN)."""
+    r = np.random.default_rng(seeding.stream(seed, "emcee"))
+    EI = ei_prior.sample(r, (4, 1000))
+    diag = {"converged": True, "scheme": "no data: exact prior draws"}
+    info = {"identified": False, "note": "EI is not identified by these data"}
+    return Posterior("modal_mcmc", EI, np.full(EI.shape, np.nan), diagnostics=diag, info=info,
+                     runtime_s=time.perf_counter() - t0)
+
+
 def modal_posterior(
     data: Measurements,
     cfg: Config,
@@ -146,6 +156,8 @@ def modal_posterior(
     t0 = time.perf_counter()
     s = settings or MCMCSettings()
     ei_prior = EIPrior.from_spec(cfg.prior)
+    if len(data) == 0:
+        return _prior_only(ei_prior, seed, t0)
     lik = ModalLikelihood(cfg, data, n_modes=6)
     post = LogPosterior(lik, ei_prior, noise_prior)
     le, ls, sd = post.map_estimate()
@@ -187,7 +199,10 @@ def modal_posterior(
         noise_prior=noise_prior.describe(),
         scheme=scheme,
     )
-    info = {"map": {"EI": math.exp(le), "sigma": math.exp(ls)}}
+    info = {"map": {"EI": math.exp(le), "sigma": math.exp(ls)},
+            "identified": bool(np.std(np.log(EI)) < 0.5 * ei_prior.log_sd)}
+    if not info["identified"]:
+        info["note"] = "EI is not identified by these data"
     return Posterior(
         "modal_mcmc", EI, sig, diagnostics=diag, info=info, runtime_s=time.perf_counter() - t0,
         predictor=ModalPredictor(cfg, EI.ravel(), n_modes),

@@ -65,7 +65,10 @@ class NoisePrior:
     @classmethod
     def build(cls, kind: str, values: np.ndarray, snr_db: float | None = None) -> NoisePrior:
         """The prior for a measurement vector `values` (and the nominal SNR for kind 'snr')."""
-        rms = float(np.sqrt(np.mean(np.asarray(values, float) ** 2)))
+        values = np.asarray(values, float)
+        if values.size == 0:  # no measurements: sigma cannot be learnt; a nominal wide range
+            return cls(kind if kind == "vague" else "vague", 1e-12, 1.0)
+        rms = float(np.sqrt(np.mean(values**2)))
         if rms <= 0:
             raise InputError("data.value", 0.0, "measurements that are not all zero")
         if kind == "snr":
