@@ -25,3 +25,12 @@ def exeter_strain():
     from bayespinn.config import preset
 
     return preset("strain")
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _one_torch_thread():
+    """Tests train tiny networks: one intra-op thread is faster and never oversubscribes the cores."""
+    import torch
+
+    torch.set_num_threads(1)
+    yield

@@ -25,6 +25,7 @@ import torch
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
+from ..threads import torch_threads
 from .lastlayer import LastLayer
 from .posterior import Posterior, mcmc_diagnostics
 from .priors import EIPrior, NoisePrior
@@ -134,6 +135,11 @@ def bpinn_posterior(
     problem = Problem.from_config(cfg, data)
     log.info("[bpinn] deterministic warm-start fit (%s profile)", opts.profile)
     res = fit(problem, settings, seed=seeding.stream(seed, "init"), device=opts.device, quiet=not opts.progress)
+    with torch_threads(1):
+        return _sample(res, problem, data, cfg, seed, opts, noise, settings, t0)
+
+
+def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posterior:
     model = res.model("cpu")
     rng = np.random.default_rng(seeding.stream(seed, "collocation"))
     ll = LastLayer(model, 0, problem, data, rng, n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic)

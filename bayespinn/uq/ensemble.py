@@ -29,6 +29,7 @@ import numpy as np
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
+from ..threads import torch_threads
 from .bpinn import IDENTIFIED_FRACTION, LastLayerPredictor
 from .lastlayer import LastLayer
 from .posterior import Posterior
@@ -96,11 +97,11 @@ def ensemble_posterior(
         pred2 = np.atleast_2d(_predict_data(r2, data))
         rss = np.sum((pred2 - data.value[None, :]) ** 2, axis=1)
         for m in range(M):
-            ll = LastLayer(model, m, base, data, np.random.default_rng(seeding.child(seed, "collocation", m)),
-                           n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic)
+            with torch_threads(1):
+                ll = LastLayer(model, m, base, data, np.random.default_rng(seeding.child(seed, "collocation", m)),
+                               n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic)
+                lap_sd[m] = ll.laplace_sd_log_theta(math.log(ll.theta_fit), 0.5 * math.log(rss[m] / n), ei_prior.log_sd)
             lls.append(ll)
-            lt = math.log(ll.theta_fit)
-            lap_sd[m] = ll.laplace_sd_log_theta(lt, 0.5 * math.log(rss[m] / n), ei_prior.log_sd)
     between = float(np.var(log_ei_m, ddof=1)) if M > 1 else 0.0
     lap_var = float(np.mean(lap_sd**2))
     pooled = (LAPLACE_DOF * lap_var + (M - 1) * between) / (LAPLACE_DOF + M - 1)
