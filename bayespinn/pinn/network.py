@@ -26,7 +26,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-from .taylor import Jet, autograd_jet, mlp_jet, product_jet
+from .taylor import Jet, autograd_jet, hidden_stack, mlp_jet, product_jet, unstack
 
 #: time constant of the hard initial-condition factor g(tau) = 1 - exp(-(tau/c)^2) (non-dimensional)
 HARD_IC_TAU = 0.05
@@ -44,6 +44,8 @@ class PINN(nn.Module):
     generators : M torch.Generators (CPU) for the initial weights, one per member
     log_ei_init : float or sequence (M,), initial log(EI / EI_ref)
     hard_bc, hard_ic : exact boundary / initial conditions by construction (see module docstring)
+    time_frequency : None, or omega_1(EI_ref) T [rad]: add the time features sin(W tau), cos(W tau)
+        at the first natural frequency for the current EI (see `_input_jet`)
     dtype : torch dtype of the parameters
     """
 
@@ -57,6 +59,7 @@ class PINN(nn.Module):
         log_ei_init: float | Sequence[float] = 0.0,
         hard_bc: bool = False,
         hard_ic: bool = False,
+        time_frequency: float | None = None,
         dtype: torch.dtype = torch.float32,
     ):
         super().__init__()
@@ -68,7 +71,8 @@ class PINN(nn.Module):
             generators = [torch.Generator().manual_seed(m) for m in range(members)]
         if len(generators) != members:
             raise ValueError(f"need {members} generators, got {len(generators)}")
-        sizes = [2] + [width] * depth + [1]
+        self.time_frequency = None if time_frequency is None else float(time_frequency)
+        sizes = [2 if self.time_frequency is None else 4] + [width] * depth + [1]
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for d_in, d_out in zip(sizes[:-1], sizes[1:], strict=True):
@@ -76,31 +80,50 @@ class PINN(nn.Module):
             w = torch.stack([torch.randn(d_in, d_out, generator=g, dtype=torch.float64) * std for g in generators])
             self.weights.append(nn.Parameter(w.to(dtype)))
             self.biases.append(nn.Parameter(torch.zeros(members, 1, d_out, dtype=dtype)))
+        if self.time_frequency is not None:
+            with torch.no_grad():  # the oscillating features start unused (their w_tt would be huge)
+                self.weights[0][:, 2:] = 0.0
         init = torch.as_tensor(log_ei_init, dtype=torch.float64).expand(members).clone()
         self.log_ei = nn.Parameter(init.to(dtype))
 
     # ------------------------------------------------------------------ inputs and outputs
     def _input_jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet:
-        """Jet of the MLP input features (M, N, 2) along x (d/dxi) and t (d/dtau)."""
+        """Jet of the MLP input features (M, N, F) along x (d/dxi) and t (d/dtau).
+
+        Features: the position (2 xi - 1, or cos(pi xi) with ``hard_bc``), the time 2 tau - 1 and, with
+        ``time_frequency``, sin(W tau) and cos(W tau), W = time_frequency sqrt(EI / EI_ref) (the first
+        natural frequency at the current EI times T; EI enters detached, so the features follow EI
+        without a gradient through them).
+        """
         M = xi.shape[0]
-        z_t = 2.0 * tau - 1.0
-        one = xi.new_ones(M, 1, 1)
-        zero = xi.new_zeros(M, 1, 1)
+        zero_b = xi.new_zeros(M, 1)  # broadcast zero / constants
+        # each feature: (value (M, N), [d/dxi^k for k = 1..kx], [d/dtau^k for k = 1..kt]); None = 0
+        feats: list[tuple[Tensor, list, list]] = []
         if self.hard_bc:
             a = math.pi * xi
             c, s = torch.cos(a), torch.sin(a)
-            f0 = torch.stack([c, z_t], dim=-1)
-            # d^k cos(pi xi) / dxi^k = pi^k (-s, -c, s, c)[k-1]; tau feature constant along x
-            derivs = [-s, -c, s, c]
-            xs = tuple(
-                torch.cat([(math.pi**k * derivs[k - 1]).unsqueeze(-1), torch.zeros_like(xi).unsqueeze(-1)], -1)
-                for k in range(1, kx + 1)
-            )
+            d = [-s, -c, s, c]  # d^k cos(pi xi) / dxi^k = pi^k d[k-1]
+            feats.append((c, [math.pi**k * d[k - 1] for k in range(1, kx + 1)], [None] * kt))
         else:
-            f0 = torch.stack([2.0 * xi - 1.0, z_t], dim=-1)
-            xs = tuple([torch.cat([2.0 * one, zero], -1)] + [None] * (kx - 1)) if kx else ()
-        ts = tuple([torch.cat([zero, 2.0 * one], -1)] + [None] * (kt - 1)) if kt else ()
-        return Jet(f0, xs, ts)
+            feats.append((2.0 * xi - 1.0, [zero_b + 2.0] + [None] * (kx - 1) if kx else [], [None] * kt))
+        feats.append((2.0 * tau - 1.0, [None] * kx, [zero_b + 2.0] + [None] * (kt - 1) if kt else []))
+        if self.time_frequency is not None:
+            W = (self.time_frequency * torch.exp(0.5 * self.log_ei.detach())).unsqueeze(-1)  # (M, 1)
+            sn, cs = torch.sin(W * tau), torch.cos(W * tau)
+            feats.append((sn, [None] * kx, [W * cs, -W * W * sn][:kt]))
+            feats.append((cs, [None] * kx, [-W * sn, -W * W * cs][:kt]))
+
+        def comp(parts: list) -> Tensor | None:
+            if all(p is None for p in parts):
+                return None
+            full = any(p is not None and p.shape[-1] != 1 for p in parts)
+            shape = xi.shape if full else (M, 1)
+            return torch.stack([xi.new_zeros(shape) if p is None else p.expand(shape) for p in parts], dim=-1)
+
+        value = torch.stack([f[0] for f in feats], dim=-1)
+        xs = tuple(comp([f[1][k] for f in feats]) for k in range(kx))
+        ts = tuple(comp([f[2][k] for f in feats]) for k in range(kt))
+        return Jet(value, xs, ts)
 
     def _envelope(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet | None:
         """Jet (M, N) of the factor multiplying the MLP output, or None without hard constraints."""
@@ -146,8 +169,40 @@ class PINN(nn.Module):
         out = mlp_jet(list(self.weights), list(self.biases), inp, fused=fused).squeeze(-1)
         env = self._envelope(xi, tau, kx, kt)
         if env is not None:
-            out = product_jet(env, Jet(out.value, out.x + (None,) * (kx - len(out.x)), out.t))
+            out = product_jet(env, out)
         return out
+
+    def basis_jet(self, xi: Tensor, tau: Tensor, kx: int = 0, kt: int = 0, engine: str = "taylor") -> Jet:
+        """Jet of the basis functions that the output layer combines, components (M, N, width + 1).
+
+        w = sum_j c_j phi_j with c = `head` (the output weights, then the output bias); phi_j is the
+        j-th neuron of the last hidden layer (and 1 for the bias), times the hard-constraint factor.
+        The jet is linear in c, which `varpro` exploits.
+        """
+        if engine not in ("taylor", "taylor-unfused"):
+            raise ValueError(f"basis_jet needs a Taylor engine, got {engine!r}")
+        inp = self._input_jet(xi, tau, kx, kt)
+        H, kx_, kt_ = hidden_stack(list(self.weights)[:-1], list(self.biases)[:-1], inp, fused=engine == "taylor")
+        M, K, N, _ = H.shape
+        ones = torch.zeros(M, K, N, 1, dtype=H.dtype, device=H.device)
+        ones[:, 0] = 1.0
+        B = unstack(torch.cat([H, ones], dim=-1), kx_, kt_)
+        env = self._envelope(xi, tau, kx, kt)
+        if env is not None:
+            e = lambda c: None if c is None else c.unsqueeze(-1)  # noqa: E731
+            B = product_jet(Jet(e(env.value), tuple(e(c) for c in env.x), tuple(e(c) for c in env.t)), B)
+        return B
+
+    @property
+    def head(self) -> Tensor:
+        """The output layer as one coefficient matrix c (M, width + 1): weights, then bias."""
+        return torch.cat([self.weights[-1][..., 0], self.biases[-1][..., 0]], dim=-1)
+
+    @torch.no_grad()
+    def set_head(self, c: Tensor) -> None:
+        """Overwrite the output layer with coefficients c (M, width + 1)."""
+        self.weights[-1].copy_(c[:, :-1].unsqueeze(-1))
+        self.biases[-1].copy_(c[:, -1:].unsqueeze(-1))
 
     def forward(self, xi: Tensor, tau: Tensor) -> Tensor:
         """w (M, N) at non-dimensional points xi, tau (M, N)."""

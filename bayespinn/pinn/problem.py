@@ -53,6 +53,11 @@ class Scales:
         return self.mu * self.U / (self.T**2 * self.q)
 
     @property
+    def time_frequency(self) -> float:
+        """omega_1(EI_ref) T [rad]: the first natural circular frequency at EI_ref times T."""
+        return (math.pi / self.L) ** 2 * math.sqrt(self.EI_ref / self.mu) * self.T
+
+    @property
     def stiffness(self) -> float:
         """EI_ref U / (L^4 q) = 1/48: coefficient of (EI/EI_ref) w_xixixixi in the residual [-]."""
         return self.EI_ref * self.U / (self.L**4 * self.q)
@@ -69,7 +74,7 @@ class Problem:
     data : Measurements, or a tuple of M Measurements sharing x, t, kind and y (different values, e.g.
         perturbed copies for the M members of an ensemble trained together)
     EI_ref : float, reference rigidity [N m^2] (the prior median); the network starts at EI_ref
-    beta : float, Gaussian delta width [m] (paper Eq. 5); default 0.025 L
+    beta : float or None, Gaussian delta width [m] (paper Eq. 5); None: the training settings' beta_rel L
     noise_sd : float or None, measurement noise sd (units of the values). When given, the objective is
         *posterior-scaled*: sum over data of (r / noise_sd)^2 / 2, physics penalties scaled by the same
         factor, plus the prior term (see `losses.Objective`)
@@ -94,9 +99,7 @@ class Problem:
             if len(d) != len(first) or not (np.array_equal(d.x, first.x) and np.array_equal(d.t, first.t)):
                 raise ValueError("all Measurements of a Problem must share the same x and t")
         object.__setattr__(self, "data", tuple(data) if len(data) > 1 else first)
-        if self.beta is None:
-            object.__setattr__(self, "beta", DEFAULT_BETA_REL * self.beam.length)
-        if not (self.beta > 0 and math.isfinite(self.beta)):
+        if self.beta is not None and not (self.beta > 0 and math.isfinite(self.beta)):
             raise ValueError(f"beta must be a finite width > 0 m, got {self.beta}")
         if self.noise_sd is not None and not self.noise_sd > 0:
             raise ValueError(f"noise_sd must be > 0, got {self.noise_sd}")
@@ -132,7 +135,13 @@ class Problem:
         a_u, a_xx = self.datasets[0].weights
         return np.abs(a_u) * sc.U + np.abs(a_xx) * 12.0 * sc.U / sc.L**2
 
-    def tensors(self, members: int, device: str | torch.device = "cpu", dtype=torch.float32) -> ProblemTensors:
+    def beta_for(self, beta_rel: float = DEFAULT_BETA_REL) -> float:
+        """The Gaussian width [m]: `beta` if set, else beta_rel L."""
+        return float(self.beta) if self.beta is not None else beta_rel * self.beam.length
+
+    def tensors(
+        self, members: int, device: str | torch.device = "cpu", dtype=torch.float32, beta_rel: float = DEFAULT_BETA_REL
+    ) -> ProblemTensors:
         """Non-dimensional torch tensors for M members (data broadcast when shared)."""
         sc = self.scales
         ds = self.datasets
@@ -167,7 +176,7 @@ class Problem:
             loads=t(self.vehicle.loads / sc.P),
             delays=t(self.vehicle.delays / sc.T),
             speed=self.vehicle.speed * sc.T / sc.L,
-            beta=self.beta / sc.L,
+            beta=torch.tensor(self.beta_for(beta_rel) / sc.L, dtype=dtype, device=device),
             stiffness=sc.stiffness,
             inertia=sc.inertia,
         )
@@ -181,7 +190,8 @@ class ProblemTensors:
     a_u w + a_xx w_xixi; value : (M, P) scaled observed values; data_scale : None, or the factor
     0.5 sum_i (s_i / sigma)^2 that turns the mean squared scaled residual into the Gaussian negative log
     likelihood; anchor : None or ((M,) loc of log(EI/EI_ref), sd); loads (J,) axle loads / P;
-    delays (J,) entry times / T; speed v T / L; beta / L; stiffness = 1/48 and inertia coefficients.
+    delays (J,) entry times / T; speed v T / L; beta / L (a 0-d tensor, so a
+    training schedule can change it in place without recompiling); stiffness = 1/48 and inertia coefficients.
     """
 
     xi: torch.Tensor
@@ -196,6 +206,6 @@ class ProblemTensors:
     loads: torch.Tensor
     delays: torch.Tensor
     speed: float
-    beta: float
+    beta: torch.Tensor
     stiffness: float
     inertia: float

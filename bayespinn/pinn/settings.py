@@ -23,6 +23,8 @@ class TrainSettings:
     Attributes
     ----------
     profile : name of the profile these settings came from (informational)
+    optimizer : 'adam' (every parameter by Adam, as the paper) or 'varpro' (output layer and log EI
+        solved by least squares at every step, hidden layers by Adam; see `varpro`)
     width, depth : hidden-layer width and number of hidden layers
     epochs : Adam steps
     lr : phi_0, initial learning rate
@@ -37,9 +39,16 @@ class TrainSettings:
     weighting : 'fixed' or 'adaptive' (paper Table 1: alpha_k = L_k / min L, detached)
     w_pde, w_ic, w_bc, w_data : fixed weights of the four terms
     beta_rel : Gaussian delta width beta / L (used when the Problem does not set beta)
+    beta_start, beta_anneal : continuation in the Gaussian width: beta starts at beta_start times its
+        value and shrinks geometrically to it over the first beta_anneal share of the Adam steps (1.0: off)
+    images : Gaussian loads with their mirror images about the supports, as in the modal solution the
+        bias correction uses (`losses.moving_load`); False is the paper's plain Gaussian
     correct_beta : divide the fitted EI by `beta.beta_bias_factor` (the O(beta^2) bias of the Gaussian
         load against point-load data, from the modal solution)
     hard_bc, hard_ic : exact boundary / initial conditions by construction (off: the paper's soft terms)
+    time_features : add sin and cos of the first natural frequency (at the current EI) times t as
+        network inputs, so the free vibration of mode 1 (about 24 cycles over a crossing of the
+        Exeter girder) is representable; off in the paper profile
     engine : 'taylor' (default), 'taylor-unfused' or 'autograd' (nested autograd, slow reference)
     compile : torch.compile the loss ('auto': on for CUDA, off for CPU; falls back to eager on failure)
     dtype : 'float32' (the paper's FP32) or 'float64'
@@ -49,6 +58,7 @@ class TrainSettings:
     """
 
     profile: str = "fast"
+    optimizer: str = "varpro"
     width: int = 64
     depth: int = 5
     epochs: int = 4000
@@ -69,9 +79,13 @@ class TrainSettings:
     w_bc: float = 1.0
     w_data: float = 1.0
     beta_rel: float = 0.025
+    beta_start: float = 1.0
+    beta_anneal: float = 0.5
+    images: bool = True
     correct_beta: bool = True
     hard_bc: bool = False
     hard_ic: bool = False
+    time_features: bool = False
     engine: str = "taylor"
     compile: str | bool = "auto"
     dtype: str = "float32"
@@ -89,7 +103,7 @@ class TrainSettings:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 0")
-        for name in ("lr", "lr_final", "lr_ei_factor", "beta_rel", "max_log_ei"):
+        for name in ("lr", "lr_final", "lr_ei_factor", "beta_rel", "max_log_ei", "beta_start", "beta_anneal"):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected a finite number > 0")
@@ -97,10 +111,16 @@ class TrainSettings:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected a finite number >= 0")
+        if self.beta_start < 1.0 or self.beta_anneal > 1.0:
+            raise ValueError(
+                f"TrainSettings.beta_start / beta_anneal: got {self.beta_start!r} / {self.beta_anneal!r}, "
+                "expected beta_start >= 1 and beta_anneal in (0, 1]"
+            )
         if not 0.0 <= self.load_fraction < 1.0:
             raise ValueError(f"TrainSettings.load_fraction: got {self.load_fraction!r}, expected a number in [0, 1)")
         choices = {
             "schedule": SCHEDULES,
+            "optimizer": ("adam", "varpro"),
             "weighting": ("fixed", "adaptive"),
             "engine": ("taylor", "taylor-unfused", "autograd"),
             "dtype": ("float32", "float64"),
@@ -131,6 +151,11 @@ class TrainSettings:
             return self.lr * (self.lr_final / self.lr) ** r
         return self.lr
 
+    def beta_factor(self, i: int) -> float:
+        """Multiple of the final Gaussian width at Adam step i (continuation; 1 after the anneal)."""
+        n = max(1.0, self.beta_anneal * self.epochs)
+        return self.beta_start ** max(0.0, 1.0 - i / n)
+
     def to_dict(self) -> dict:
         return asdict(self)
 
@@ -147,8 +172,8 @@ PROFILES: dict[str, TrainSettings] = {
     ),
     "fast": TrainSettings(),
     "paper": TrainSettings(
-        profile="paper", width=64, depth=5, epochs=60_000, lr=1e-2, lr_final=0.7e-2, schedule="paper",
+        profile="paper", optimizer="adam", width=64, depth=5, epochs=60_000, lr=1e-2, lr_final=0.7e-2, schedule="paper",
         n_pde=2500, n_bc=2000, n_ic=1000, load_fraction=0.0, resample_every=0, lbfgs_iters=0,
-        weighting="adaptive", checkpoint_every=2000, log_every=200,
+        weighting="adaptive", images=False, time_features=False, checkpoint_every=2000, log_every=200,
     ),
 }

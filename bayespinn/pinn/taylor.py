@@ -243,38 +243,64 @@ def _stack(jet: Jet) -> Tensor:
     return torch.stack([c.expand_as(v) for c in (v, *jet.x, *jet.t)], dim=1)
 
 
+def unstack(H: Tensor, kx: int, kt: int) -> Jet:
+    """Jet (components (M, N, d)) from a stacked (M, K, N, d) tensor (views, no copy)."""
+    c = H.unbind(1)
+    return Jet(c[0], tuple(c[1 : 1 + kx]), tuple(c[1 + kx :]))
+
+
+def hidden_stack(
+    weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet, *, fused: bool = True
+) -> tuple[Tensor, int, int]:
+    """The jet of the last hidden layer, stacked: (H (M, K, N, d), kx, kt).
+
+    Parameters
+    ----------
+    weights, biases : the hidden layers only, Tensors (M, d_in, d_out) and (M, 1, d_out)
+    jet : Jet of the network inputs, components (M, N, d_in) or (M, 1, d_in)
+    fused : after the first layer, carry the jet as one stacked tensor through one matmul per layer and
+        `_FusedTanhJet` (hand-written backward); False uses the component-wise formulas with autograd
+        throughout (same numbers, slower, differentiable any number of times; kept for tests and for
+        the nested-autograd reference)
+    """
+    h = tanh_jet(linear_jet(jet, weights[0], biases[0]))
+    kx, kt = len(h.x), len(h.t)
+    if not fused:
+        for w, b in zip(weights[1:], biases[1:], strict=True):
+            h = tanh_jet(linear_jet(h, w, b))
+        return _stack(h), kx, kt
+    H = _stack(h)
+    M, K, N, _ = H.shape
+    for w, b in zip(weights[1:], biases[1:], strict=True):
+        Z = torch.bmm(H.reshape(M, K * N, -1), w).view(M, K, N, -1)
+        H = _FusedTanhJet.apply(Z, b, kx, kt)
+    return H, kx, kt
+
+
+def linear_stack(H: Tensor, kx: int, kt: int, weight: Tensor, bias: Tensor) -> Jet:
+    """The output layer on a stacked hidden jet: Jet of H W + b (bias on the value only)."""
+    M, K, N, d = H.shape
+    out = torch.bmm(H.reshape(M, K * N, d), weight).view(M, K, N, -1)
+    j = unstack(out, kx, kt)
+    return Jet(j.value + bias, j.x, j.t)
+
+
 def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet, *, fused: bool = True) -> Jet:
     """Propagate an input jet through tanh hidden layers and a linear output layer.
 
     Parameters
     ----------
-    weights : Tensors (M, d_in, d_out), one per layer (the last is the output layer)
+    weights : Tensors (M, d_in, d_out), one per layer (the last is the output layer); at least two
     biases : Tensors (M, 1, d_out)
     jet : Jet of the network inputs, components (M, N, d_in) or (M, 1, d_in)
-    fused : after the first layer, carry the jet as one stacked tensor (M, K, N, d) through one matmul
-        per layer and `_FusedTanhJet` (hand-written backward); False uses the component-wise formulas
-        with autograd throughout (same numbers, slower; kept as a second implementation for tests)
+    fused : see `hidden_stack`
 
     Returns
     -------
     Jet of the network outputs, components (M, N, d_out).
     """
-    last = len(weights) - 1
-    h = tanh_jet(linear_jet(jet, weights[0], biases[0])) if last > 0 else linear_jet(jet, weights[0], biases[0])
-    if last == 0:
-        return h
-    if not fused or any(c is None for c in (*h.x, *h.t)):
-        for w, b in zip(weights[1:last], biases[1:last], strict=True):
-            h = tanh_jet(linear_jet(h, w, b))
-        return linear_jet(h, weights[last], biases[last])
-    kx, kt = len(h.x), len(h.t)
-    H = _stack(h)
-    M, K, N, _ = H.shape
-    for w, b in zip(weights[1:last], biases[1:last], strict=True):
-        Z = torch.bmm(H.reshape(M, K * N, -1), w).view(M, K, N, -1)
-        H = _FusedTanhJet.apply(Z, b, kx, kt)
-    out = torch.bmm(H.reshape(M, K * N, -1), weights[last]).view(M, K, N, -1).unbind(1)
-    return Jet(out[0] + biases[last], tuple(out[1 : 1 + kx]), tuple(out[1 + kx :]))
+    H, kx, kt = hidden_stack(weights[:-1], biases[:-1], jet, fused=fused)
+    return linear_stack(H, kx, kt, weights[-1], biases[-1])
 
 
 def product_jet(a: Jet, b: Jet) -> Jet:

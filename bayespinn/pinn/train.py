@@ -26,15 +26,25 @@ import torch
 
 from ..errors import TrainingDiverged
 from .beta import beta_bias_factor
-from .losses import TERMS, Objective
+from .losses import TERMS, Objective, field_jets, prior_term, terms_from_jets
 from .network import PINN
 from .problem import Problem
 from .sampling import Collocation, sample_collocation
 from .settings import TrainSettings
+from .taylor import Jet
+from .varpro import head_system, solve_head
 
 log = logging.getLogger(__name__)
 
 CHECKPOINT_SCHEMA = "bayespinn.pinn.checkpoint/1"
+#: varpro: the golden-section bracket for log EI around its current value, per step
+VARPRO_HALF_WIDTH = 0.25
+
+
+def _contract(j: Jet, c: torch.Tensor) -> Jet:
+    """Jet of w = sum_d phi_d c_d from a basis jet (M, N, D) and coefficients c (M, D)."""
+    f = lambda a: None if a is None else torch.bmm(a, c.unsqueeze(-1))[..., 0]  # noqa: E731
+    return Jet(f(j.value), tuple(f(a) for a in j.x), tuple(f(a) for a in j.t))
 
 
 @dataclass
@@ -71,9 +81,7 @@ class FitResult:
 
     def model(self, device: str | torch.device = "cpu") -> PINN:
         """The trained network (all members), in eval mode on `device`."""
-        s = self.settings
-        net = PINN(s.width, s.depth, members=self.members or 1, hard_bc=s.hard_bc, hard_ic=s.hard_ic,
-                   dtype=_dtype(s.dtype))
+        net = _build_model(self.problem, self.settings, self.members or 1)
         net.load_state_dict(self.state)
         return net.to(device).eval()
 
@@ -82,12 +90,19 @@ class FitResult:
         sc = self.problem.scales
         net = self.model()
         M = self.members or 1
-        xi = torch.as_tensor(np.broadcast_to(np.asarray(x, float) / sc.L, (M, np.size(x))), dtype=_dtype(self.settings.dtype))
-        tau = torch.as_tensor(np.broadcast_to(np.asarray(t, float) / sc.T, (M, np.size(t))), dtype=xi.dtype)
+        dt = _dtype(self.settings.dtype)
+        xi = torch.tensor(np.broadcast_to(np.asarray(x, float) / sc.L, (M, np.size(x))), dtype=dt)
+        tau = torch.tensor(np.broadcast_to(np.asarray(t, float) / sc.T, (M, np.size(t))), dtype=dt)
         with torch.no_grad():
             j = net.jet(xi, tau, kx, 0)
         out = j.dx(kx).double().numpy() * sc.U / sc.L**kx
         return out if self.members else out[0]
+
+
+def _build_model(problem: Problem, s: TrainSettings, members: int, generators=None) -> PINN:
+    tf = problem.scales.time_frequency if s.time_features else None
+    return PINN(s.width, s.depth, members=members, generators=generators, hard_bc=s.hard_bc, hard_ic=s.hard_ic,
+                time_frequency=tf, dtype=_dtype(s.dtype))
 
 
 def _dtype(name: str) -> torch.dtype:
@@ -126,35 +141,61 @@ class _Trainer:
         seeds = _member_seeds(seed, members)
         init_gens = [torch.Generator().manual_seed(a) for a, _ in seeds]
         self.col_gens = [torch.Generator().manual_seed(b) for _, b in seeds]
-        self.model = PINN(s.width, s.depth, members=members, generators=init_gens, hard_bc=s.hard_bc,
-                          hard_ic=s.hard_ic, dtype=self.dtype).to(device)
-        self.pt = problem.tensors(members, device, self.dtype)
+        self.model = _build_model(problem, s, members, init_gens).to(device)
+        self.beta = problem.beta_for(s.beta_rel)
+        self.pt = problem.tensors(members, device, self.dtype, beta_rel=s.beta_rel)
+        self.varpro = s.optimizer == "varpro"
+        if self.varpro and s.engine == "autograd":
+            raise ValueError("optimizer 'varpro' needs a Taylor engine")
         self.compiled = _want_compile(s, device)
-        engine = "taylor-unfused" if self.compiled and s.engine == "taylor" else s.engine
-        self.objective = Objective(s.weighting, s.w_pde, s.w_ic, s.w_bc, s.w_data, engine=engine)
-        self._loss = self._eval
-        if self.compiled:
-            try:
-                self._loss = torch.compile(self._eval, dynamic=False)
-            except Exception as exc:  # pragma: no cover - depends on the installation
-                log.warning("torch.compile unavailable (%s); training eagerly", exc)
-                self.compiled = False
-        net_params = [p for n, p in self.model.named_parameters() if n != "log_ei"]
-        self.adam = torch.optim.Adam(
-            [{"params": net_params}, {"params": [self.model.log_ei], "lr_factor": s.lr_ei_factor}], lr=s.lr
-        )
+        self._set_engine(s.engine)
+        head = {id(self.model.weights[-1]), id(self.model.biases[-1]), id(self.model.log_ei)}
+        self.hidden = [p for p in self.model.parameters() if id(p) not in head]
+        if self.varpro:
+            groups = [{"params": self.hidden}]
+        else:
+            head_params = [self.model.weights[-1], self.model.biases[-1]]
+            groups = [{"params": self.hidden + head_params},
+                      {"params": [self.model.log_ei], "lr_factor": s.lr_ei_factor}]
+        self.adam = torch.optim.Adam(groups, lr=s.lr)
         self.lbfgs: torch.optim.LBFGS | None = None
         self.col: Collocation | None = None
+        self.prev_terms: dict | None = None
         self.step = 0
         self.history: dict[str, list] = {k: [] for k in ("step", "lr", "total", "EI_raw", *TERMS)}
         self.elapsed = 0.0
 
+    def _set_engine(self, engine: str) -> None:
+        s = self.s
+        if self.compiled and engine == "taylor":
+            engine = "taylor-unfused"  # inductor fuses the plain formulas better than the custom Function
+        self.objective = Objective(s.weighting, s.w_pde, s.w_ic, s.w_bc, s.w_data, engine=engine, images=s.images)
+        fn = self._basis if self.varpro else self._eval
+        if self.compiled:
+            try:
+                fn = torch.compile(fn, dynamic=False)
+            except Exception as exc:  # pragma: no cover - depends on the installation
+                log.warning("torch.compile unavailable (%s); training eagerly", exc)
+                self.compiled = False
+        self._fn = fn
+
+    def _call(self, col: Collocation):
+        try:
+            return self._fn(col)
+        except Exception as exc:
+            if not self.compiled:
+                raise
+            log.warning("torch.compile failed (%s: %s); falling back to eager", exc.__class__.__name__, exc)
+            self.compiled = False
+            self._set_engine(self.s.engine)
+            return self._fn(col)
+
     # ------------------------------------------------------------------ pieces
-    def sample(self, scale: int = 1) -> Collocation:
+    def sample(self) -> Collocation:
         s, pt = self.s, self.pt
         col = sample_collocation(
-            self.col_gens, s.n_pde * scale, s.n_bc * scale, s.n_ic * scale, load_fraction=s.load_fraction,
-            speed=pt.speed, delays=pt.delays, beta=pt.beta,
+            self.col_gens, s.n_pde, s.n_bc, s.n_ic, load_fraction=s.load_fraction,
+            speed=pt.speed, delays=pt.delays, beta=float(pt.beta),
         )
         return col.to(self.device, self.dtype)
 
@@ -163,17 +204,36 @@ class _Trainer:
         total, per = self.objective.total(terms, self.pt)
         return total, per, terms
 
-    def loss(self, col: Collocation):
-        try:
-            return self._loss(col)
-        except Exception as exc:
-            if not self.compiled:
-                raise
-            log.warning("torch.compile failed (%s: %s); falling back to eager", exc.__class__.__name__, exc)
-            self.compiled = False
-            self.objective = Objective(**{**self.objective.__dict__, "engine": self.s.engine})
-            self._loss = self._eval
-            return self._eval(col)
+    def _basis(self, col: Collocation):
+        return field_jets(self.model, self.pt, col, self.objective.engine, basis=True)
+
+    def loss(self, col: Collocation, solve: bool = True):
+        """(total, per-member totals (M,), terms). In varpro mode the head and log EI are first solved
+        (unless ``solve=False``) and written into the model."""
+        if not self.varpro:
+            return self._call(col)
+        basis = self._call(col)
+        model, pt = self.model, self.pt
+        if solve:
+            posterior = pt.data_scale is not None
+            prev = self.prev_terms if self.s.weighting == "adaptive" else None
+            weights = self.objective.weights(prev, posterior) if prev is not None else (
+                self.objective.weights({k: torch.ones(self.M, device=self.device) for k in TERMS}, posterior)
+                if self.s.weighting == "adaptive" else self.objective.weights({}, posterior))
+            system = head_system(basis, pt, col, weights, self.objective.images)
+            c, sol = solve_head(system, model.log_ei.detach(), half_width=VARPRO_HALF_WIDTH,
+                                s_max=self.s.max_log_ei, data_scale=pt.data_scale, anchor=pt.anchor)
+            model.set_head(c.to(self.dtype))
+            with torch.no_grad():
+                model.log_ei.copy_(sol.to(self.dtype))
+        c = model.head.detach()
+        jets = {k: _contract(j, c) for k, j in basis.items()}
+        terms = terms_from_jets(jets, model.EI_ratio.detach(), pt, col, self.objective.images)
+        if pt.anchor is not None:
+            terms["prior"] = prior_term(model.log_ei.detach(), pt)
+        total, per = self.objective.total(terms, pt)
+        self.prev_terms = {k: v.detach() for k, v in terms.items()}
+        return total, per, terms
 
     def guard(self, total: torch.Tensor, where: str) -> None:
         bad = not bool(torch.isfinite(total))
@@ -206,8 +266,14 @@ class _Trainer:
         return self.problem.EI_ref * np.exp(self.model.log_ei.detach().cpu().double().numpy())
 
     # ------------------------------------------------------------------ phases
+    def set_beta(self, factor: float) -> None:
+        """Set the Gaussian width used by the loss to factor * beta (continuation)."""
+        self.pt.beta.fill_(factor * self.beta / self.problem.scales.L)
+
     def adam_step(self) -> None:
         s = self.s
+        if s.beta_start > 1.0:
+            self.set_beta(s.beta_factor(self.step))
         if self.col is None or (s.resample_every and self.step % s.resample_every == 0):
             self.col = self.sample()
         lr = s.learning_rate(self.step)
@@ -215,36 +281,36 @@ class _Trainer:
             g["lr"] = lr * g.get("lr_factor", 1.0)
         self.adam.zero_grad(set_to_none=True)
         total, per, terms = self.loss(self.col)
+        self.guard(total.detach(), "Adam")
         total.backward()
-        self.guard(total, "Adam")
         self.adam.step()
         if self.step % s.log_every == 0:
             self.record(lr, per, terms)
         self.step += 1
 
+    def _make_lbfgs(self) -> torch.optim.LBFGS:
+        params = self.hidden if self.varpro else list(self.model.parameters())
+        return torch.optim.LBFGS(params, lr=1.0, history_size=50, tolerance_grad=0.0, tolerance_change=0.0,
+                                 line_search_fn="strong_wolfe")
+
     def lbfgs_chunk(self, n: int) -> None:
+        self.set_beta(1.0)
         if self.lbfgs is None:
-            self.col = self.sample(scale=1)
-            self.lbfgs = torch.optim.LBFGS(
-                self.model.parameters(), lr=1.0, max_iter=n, history_size=50, tolerance_grad=0.0,
-                tolerance_change=0.0, line_search_fn="strong_wolfe",
-            )
+            self.col = self.sample()
+            self.lbfgs = self._make_lbfgs()
         for g in self.lbfgs.param_groups:
             g["max_iter"] = n
             g["max_eval"] = int(n * 1.25)
-        last = {}
 
         def closure():
             self.lbfgs.zero_grad(set_to_none=True)
             total, per, terms = self.loss(self.col)
-            if not bool(torch.isfinite(total)):
-                return total  # the line search rejects it; checked after the chunk
-            total.backward()
-            last["v"] = (per, terms)
+            if bool(torch.isfinite(total)):
+                total.backward()
             return total
 
         self.lbfgs.step(closure)
-        total, per, terms = self.loss(self.col)
+        total, per, terms = self.loss(self.col)  # (with grad: no_grad would make torch.compile recompile)
         self.guard(total.detach(), "L-BFGS")
         self.step += n
         self.record(0.0, per, terms)
@@ -275,10 +341,7 @@ class _Trainer:
         self.col = None if st["col"] is None else Collocation(*st["col"]).to(self.device, self.dtype)
         self.step, self.history, self.elapsed = st["step"], st["history"], st["elapsed"]
         if st["lbfgs"] is not None:
-            self.lbfgs = torch.optim.LBFGS(
-                self.model.parameters(), lr=1.0, history_size=50, tolerance_grad=0.0, tolerance_change=0.0,
-                line_search_fn="strong_wolfe",
-            )
+            self.lbfgs = self._make_lbfgs()
             self.lbfgs.load_state_dict(st["lbfgs"])
 
     def save(self, path: Path) -> None:
@@ -317,7 +380,7 @@ def fit(
     init_state : a state_dict to start from (e.g. `FitResult.state` of an earlier fit) instead of the
         seeded initial weights
     callback : called as callback(step, info) after each Adam step / L-BFGS chunk, info holding
-        'phase' and 'EI_raw'; an exception raised by it stops the fit (the checkpoint stays)
+        'phase' ('adam' or 'lbfgs'), 'EI_raw' (M,) and 'model' (the PINN being trained); an exception raised by it stops the fit (the checkpoint stays)
 
     Returns
     -------
@@ -330,8 +393,6 @@ def fit(
     """
     if settings is None or isinstance(settings, str):
         settings = TrainSettings.for_profile(settings or "fast")
-    if problem.beta is None:  # pragma: no cover - Problem fills it
-        raise ValueError("problem.beta unset")
     M = 1 if members is None else int(members)
     if M < 1:
         raise ValueError(f"members must be >= 1, got {members}")
@@ -367,20 +428,21 @@ def fit(
             if path is not None and tr.step % s.checkpoint_every == 0:
                 save_now()
             if callback is not None:
-                callback(tr.step, {"phase": "adam", "EI_raw": tr.EI_raw()})
+                callback(tr.step, {"phase": "adam", "EI_raw": tr.EI_raw(), "model": tr.model})
         while tr.step < n_total:
             n = min(s.lbfgs_chunk, n_total - tr.step)
             tr.lbfgs_chunk(n)
             bar.update(n)
             save_now()
             if callback is not None:
-                callback(tr.step, {"phase": "lbfgs", "EI_raw": tr.EI_raw()})
+                callback(tr.step, {"phase": "lbfgs", "EI_raw": tr.EI_raw(), "model": tr.model})
     finally:
         bar.close()
-    # final losses on the last point set
+    # final losses on the last point set, at the final Gaussian width
+    tr.set_beta(1.0)
     if tr.col is None:
         tr.col = tr.sample()
-    total, per, terms = tr._eval(tr.col)
+    total, per, terms = tr.loss(tr.col)  # varpro: re-solves the head for the final hidden layers
     tr.guard(total.detach(), "final")
     losses = {k: terms[k].detach().cpu().double().numpy() for k in terms}
     losses["total"] = per.detach().cpu().double().numpy()
@@ -388,7 +450,7 @@ def fit(
     EI_raw = tr.EI_raw()
     factor = 1.0
     if s.correct_beta:
-        factor = beta_bias_factor(problem.beam, problem.vehicle, problem.datasets[0], problem.beta,
+        factor = beta_bias_factor(problem.beam, problem.vehicle, problem.datasets[0], tr.beta,
                                   EI=float(np.median(EI_raw)))
     EI = EI_raw / factor
     hist = {k: np.asarray(v) for k, v in tr.history.items()}

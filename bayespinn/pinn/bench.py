@@ -1,0 +1,183 @@
+"""Performance figures of the PINN engine (the `bayespinn bench` command calls these).
+
+Every figure is the median wall time of repeated full training steps -- forward pass, PDE residual with
+u_xxxx and u_tt, backward pass, optimiser step -- after a warm-up, with the variants compared measured
+in the same process and interleaved round by round, so a change in machine load hits all of them alike.
+"""
+
+from __future__ import annotations
+
+import logging
+import statistics
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from ..config import preset
+from ..data.synthetic import sample_layout
+from .losses import pde_residual
+from .network import PINN
+from .problem import Problem
+from .settings import TrainSettings
+
+log = logging.getLogger(__name__)
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def _timed(fn: Callable[[], None], device: torch.device) -> float:
+    _sync(device)
+    t0 = time.perf_counter()
+    fn()
+    _sync(device)
+    return 1e3 * (time.perf_counter() - t0)
+
+
+def _interleaved(steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int) -> dict[str, float]:
+    """Median ms per call of each step function, measured round-robin after `warmup` calls each."""
+    for fn in steps.values():
+        for _ in range(warmup):
+            fn()
+    times: dict[str, list[float]] = {k: [] for k in steps}
+    for _ in range(repeats):
+        for k, fn in steps.items():
+            times[k].append(_timed(fn, device))
+    return {k: statistics.median(v) for k, v in times.items()}
+
+
+def _deflection_problem() -> Problem:
+    cfg = preset("deflection")
+    return Problem.from_config(cfg, sample_layout(cfg, 0))
+
+
+def bench_derivatives(
+    points: int = 2500,
+    width: int = 64,
+    depth: int = 5,
+    device: str = "cpu",
+    *,
+    repeats: int = 15,
+    warmup: int = 3,
+    compile: bool | None = None,
+    seed: int = 0,
+) -> dict:
+    """Training-step time with nested autograd versus Taylor-mode derivatives.
+
+    Parameters
+    ----------
+    points : PDE collocation points; width, depth : the MLP (paper: 2500, 64, 5)
+    device : 'cpu' or 'cuda'
+    repeats, warmup : timed and untimed steps per variant
+    compile : also time the Taylor step under torch.compile (default: yes if a compiler works)
+
+    Returns
+    -------
+    dict with points, width, depth, threads, autograd_ms, taylor_ms (eager Taylor mode, the engine's
+    default on CPU), speedup = autograd_ms / taylor_ms, max_rel_diff (largest of max|Taylor - autograd|
+    / max|autograd| over u, u_xx, u_xxxx, u_t, u_tt at the points, float32), and, when compiled,
+    taylor_compiled_ms, compiled_speedup, compile_s (first compiled step, compilation included).
+    """
+    dev = torch.device(device)
+    pt = _deflection_problem().tensors(1, dev)
+    g = torch.Generator().manual_seed(seed)
+    xi = torch.rand(1, points, generator=g).to(dev)
+    tau = torch.rand(1, points, generator=g).to(dev)
+    nets, opts = {}, {}
+    variants = ["autograd", "taylor"]
+    for name in variants + ["compiled"]:
+        nets[name] = PINN(width, depth, generators=[torch.Generator().manual_seed(seed)]).to(dev)
+        opts[name] = torch.optim.Adam(nets[name].parameters(), lr=1e-4)
+
+    def make_step(name: str, engine: str, loss_fn=None):
+        net, opt = nets[name], opts[name]
+
+        def loss():
+            return (pde_residual(net, xi, tau, pt, engine=engine) ** 2).mean()
+
+        fn = loss_fn(loss) if loss_fn is not None else loss
+
+        def step():
+            opt.zero_grad(set_to_none=True)
+            fn().backward()
+            opt.step()
+
+        return step
+
+    steps = {"autograd": make_step("autograd", "autograd"), "taylor": make_step("taylor", "taylor")}
+    out: dict = {"points": points, "width": width, "depth": depth, "threads": torch.get_num_threads()}
+    want_compile = compile if compile is not None else True
+    if want_compile:
+        try:
+            cstep = make_step("compiled", "taylor-unfused", lambda f: torch.compile(f, dynamic=False))
+            out["compile_s"] = _timed(cstep, dev) / 1e3
+            steps["compiled"] = cstep
+        except Exception as exc:  # pragma: no cover - depends on the installation
+            log.warning("torch.compile unavailable for the benchmark: %s", exc)
+    med = _interleaved(steps, dev, warmup, repeats)
+    out["autograd_ms"] = med["autograd"]
+    out["taylor_ms"] = med["taylor"]
+    out["speedup"] = med["autograd"] / med["taylor"]
+    if "compiled" in med:
+        out["taylor_compiled_ms"] = med["compiled"]
+        out["compiled_speedup"] = med["autograd"] / med["compiled"]
+    # agreement of the two engines on the same (freshly initialised) network
+    net = PINN(width, depth, generators=[torch.Generator().manual_seed(seed)]).to(dev)
+    a = net.jet(xi, tau, 4, 2, engine="taylor")
+    b = net.jet(xi, tau, 4, 2, engine="autograd")
+    diffs = [
+        float((a.dx(k) - b.dx(k)).abs().max() / b.dx(k).abs().max()) for k in (0, 2, 4)
+    ] + [float((a.dt(k) - b.dt(k)).abs().max() / b.dt(k).abs().max()) for k in (1, 2)]
+    out["max_rel_diff"] = max(diffs)
+    return out
+
+
+def bench_ensemble(
+    members: int = 8,
+    points: int = 1000,
+    width: int = 64,
+    depth: int = 5,
+    device: str = "cpu",
+    *,
+    optimizer: str = "adam",
+    repeats: int = 8,
+    warmup: int = 2,
+) -> dict:
+    """M members trained one after another versus together as one batched network.
+
+    One "epoch" is one training step of every member (all loss terms, backward, Adam step). Sequential:
+    M single networks stepped in turn; batched: one `PINN` with M members (weights (M, d_in, d_out),
+    torch.bmm), as `fit(..., members=M)` trains them.
+
+    Returns
+    -------
+    dict with members, points, sequential_ms_per_epoch, batched_ms_per_epoch,
+    speedup = sequential / batched.
+    """
+    from .train import _Trainer  # the training loop's own step
+
+    dev = torch.device(device)
+    prob = _deflection_problem()
+    s = TrainSettings.for_profile(
+        "fast", optimizer=optimizer, width=width, depth=depth, n_pde=points, n_bc=max(points // 5, 2),
+        n_ic=max(points // 5, 1), compile=False, resample_every=0, lbfgs_iters=0,
+    )
+    seq = [_Trainer(prob, s, np.random.SeedSequence(0, spawn_key=(m,)), 1, dev) for m in range(members)]
+    bat = _Trainer(prob, s, 0, members, dev)
+
+    def sequential():
+        for tr in seq:
+            tr.adam_step()
+
+    med = _interleaved({"seq": sequential, "bat": bat.adam_step}, dev, warmup, repeats)
+    return {
+        "members": members,
+        "points": points,
+        "sequential_ms_per_epoch": med["seq"],
+        "batched_ms_per_epoch": med["bat"],
+        "speedup": med["seq"] / med["bat"],
+    }
