@@ -25,7 +25,9 @@ def smoke_fit():
     cfg = preset()
     data = simulate(cfg, 20.0, 1)
     problem = Problem.from_config(cfg, data)
-    res = fit(problem, TrainSettings.for_profile("smoke"), seed=0, quiet=True)
+    # Adam (not varpro): varpro fits the supports so well that the dense observation-space check
+    # below becomes too ill-conditioned to be a reference
+    res = fit(problem, TrainSettings.for_profile("smoke", optimizer="adam"), seed=0, quiet=True)
     return cfg, data, problem, res
 
 

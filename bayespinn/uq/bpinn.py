@@ -131,6 +131,11 @@ def bpinn_posterior(
     from ..pinn import Problem, TrainSettings, fit
 
     t0 = time.perf_counter()
+    if len(data) == 0:
+        from .modal_mcmc import prior_only
+
+        log.warning("[bpinn] no measurements: EI is not identified, returning the prior")
+        return prior_only(EIPrior.from_spec(cfg.prior), seed, t0, method="bpinn")
     settings = TrainSettings.for_profile(opts.profile)
     problem = Problem.from_config(cfg, data)
     log.info("[bpinn] deterministic warm-start fit (%s profile)", opts.profile)

@@ -65,6 +65,11 @@ def ensemble_posterior(
     settings = TrainSettings.for_profile(opts.profile)
     ei_prior = EIPrior.from_spec(cfg.prior)
     n = len(data)
+    if n == 0:
+        from .modal_mcmc import prior_only
+
+        log.warning("[ensemble] no measurements: EI is not identified, returning the prior")
+        return prior_only(ei_prior, seed, t0, method="ensemble")
     quiet = not opts.progress
     # phase 1: all members on the measured data
     log.info("[ensemble] phase 1: %d members on the measured data", M)

@@ -129,13 +129,17 @@ def choose_modes(cfg: Config, data: Measurements, EI: float, sigma: float, start
         n *= 2
 
 
-def _prior_only(ei_prior: EIPrior, seed, t0: float) -> Posterior:
-    """No measurements: the posterior is the prior (exact draws); sigma is not estimable (NaN)."""
+def prior_only(ei_prior: EIPrior, seed, t0: float, method: str = "modal_mcmc") -> Posterior:
+    """No measurements: the posterior is the prior (exact draws); sigma is not estimable (NaN).
+
+    Every method returns this when there are no data: the physics alone fixes the shape of the
+    response for any EI, so only measurements can identify EI.
+    """
     r = np.random.default_rng(seeding.stream(seed, "emcee"))
     EI = ei_prior.sample(r, (4, 1000))
     diag = {"converged": True, "scheme": "no data: exact prior draws"}
     info = {"identified": False, "note": "EI is not identified by these data"}
-    return Posterior("modal_mcmc", EI, np.full(EI.shape, np.nan), diagnostics=diag, info=info,
+    return Posterior(method, EI, np.full(EI.shape, np.nan), diagnostics=diag, info=info,
                      runtime_s=time.perf_counter() - t0)
 
 
@@ -157,7 +161,7 @@ def modal_posterior(
     s = settings or MCMCSettings()
     ei_prior = EIPrior.from_spec(cfg.prior)
     if len(data) == 0:
-        return _prior_only(ei_prior, seed, t0)
+        return prior_only(ei_prior, seed, t0)
     lik = ModalLikelihood(cfg, data, n_modes=6)
     post = LogPosterior(lik, ei_prior, noise_prior)
     le, ls, sd = post.map_estimate()
