@@ -1,0 +1,344 @@
+"""What the study scripts share: the common flags, provenance, and merging rows into a table's JSON.
+
+No science here: the scripts call bayespinn's public API, and this module only parses, records and
+merges. Every table JSON holds `rows` (one per method and SNR level or scenario) and `runs` (the
+provenance of each invocation that produced rows); re-running a script for some methods replaces
+those methods' rows and keeps the others, so a table can be filled in one method at a time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import json
+import logging
+import math
+import os
+import platform
+import subprocess
+import sys
+import warnings
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+import numpy as np
+
+from bayespinn.cli import parse_methods, resolve_device
+from bayespinn.config import parse_snr, snr_label
+from bayespinn.data.measurements import atomic_write_text
+from bayespinn.errors import InputError
+from bayespinn.executor import cpu_count
+from bayespinn.pipeline import git_commit, versions
+from bayespinn.uq.methods import KEYS, RunOptions
+
+log = logging.getLogger("studies")
+
+#: summary keys in report order
+METHOD_ORDER = ("modal_mcmc", "ensemble", "bpinn")
+
+
+# ------------------------------------------------------------------------------------------ flags
+def parser(description: str) -> argparse.ArgumentParser:
+    """The flags every study script takes."""
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument(
+        "--profile",
+        default="fast",
+        choices=("smoke", "fast", "paper"),
+        help="smoke (seconds, tests), fast (default, minutes on a 2-core CPU), paper",
+    )
+    p.add_argument(
+        "--methods",
+        default="modal,ensemble,bpinn",
+        help="comma list of modal, ensemble, bpinn, or 'all' (default all three)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="root seed (default 0)")
+    p.add_argument("--out", default="reports/paper", help="output folder (default reports/paper)")
+    p.add_argument("--members", type=int, default=5, help="ensemble size (default 5)")
+    p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    p.add_argument(
+        "--noise-prior",
+        dest="noise_prior",
+        default="vague",
+        choices=("vague", "snr"),
+        help="prior on the noise sd (default vague)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+    return p
+
+
+def methods_of(text: str) -> list[str]:
+    """CLI method names from a comma list (bayespinn's own parser and order)."""
+    return parse_methods(text)
+
+
+def levels_of(text: str) -> list[float | None]:
+    """SNR levels from a comma list such as 'clean,10,20' (None is clean)."""
+    return [parse_snr(s.strip(), "--snr") for s in text.split(",") if s.strip()]
+
+
+def run_options(args, snr_db: float | None = None) -> RunOptions:
+    return RunOptions(
+        profile=args.profile,
+        members=args.members,
+        device=resolve_device(args.device),
+        noise_prior=args.noise_prior,
+        snr_db=snr_db,
+        progress=not args.quiet,
+    )
+
+
+def setup_logging(quiet: bool) -> None:
+    """Progress of the scripts and of bayespinn on stderr (warnings only with --quiet)."""
+    logging.basicConfig(
+        level=logging.WARNING if quiet else logging.INFO,
+        format="%(message)s",
+        stream=sys.stderr,
+        force=True,
+    )
+    for noisy in ("matplotlib", "h5py", "numexpr", "PIL"):
+        logging.getLogger(noisy).setLevel(logging.WARNING)
+    warnings.filterwarnings("ignore", category=FutureWarning, module="arviz")
+    warnings.filterwarnings("ignore", message=".*ArviZ is undergoing a major refactor.*")
+
+
+def entry(main: Callable[[list[str] | None], int]) -> None:
+    """Run main() as a script: exit 2 with one line for bad input, else main's code."""
+    try:
+        code = main(None)
+    except InputError as exc:
+        print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
+        code = 2
+    sys.exit(code)
+
+
+# ------------------------------------------------------------------------------------- provenance
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _git_dirty() -> bool | None:
+    try:
+        r = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=Path(__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+        return bool(r.stdout.strip()) if r.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def command_line(script: str, argv: list[str]) -> str:
+    """The command that reproduces this invocation, e.g. `python studies/table4.py --methods modal`."""
+    p = Path(script).resolve()
+    try:
+        shown = os.path.relpath(p)
+        if shown.startswith(".."):
+            shown = str(p)
+    except ValueError:
+        shown = str(p)
+    import shlex
+
+    return shlex.join(["python", shown, *argv])
+
+
+def provenance(script: str, argv: list[str], args, **extra) -> dict:
+    """Who made these rows: command, profile, seed, date, machine, versions."""
+    try:
+        import torch
+
+        threads = int(torch.get_num_threads())
+    except Exception:  # noqa: BLE001 - torch is a dependency, but never lose a table for it
+        threads = None
+    device = resolve_device(args.device)
+    out = {
+        "command": command_line(script, argv),
+        "profile": args.profile,
+        "seed": args.seed,
+        "members": args.members,
+        "noise_prior": args.noise_prior,
+        "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "machine": {
+            "cpus": cpu_count(),
+            "cpu_model": _cpu_model(),
+            "torch_threads": threads,
+            "device": device,
+            "platform": platform.platform(),
+        },
+        "versions": versions(),
+        "git_commit": git_commit(),
+        "git_dirty": _git_dirty(),
+    }
+    out.update(extra)
+    return out
+
+
+def provenance_lines(runs: dict, used: Iterable[str]) -> list[str]:
+    """One bullet per run that produced rows of the table, labelled as in the tables' `run` column."""
+    lines = []
+    for rid in used:
+        r = runs[rid]
+        m = r["machine"]
+        git = (r.get("git_commit") or "n/a")[:12] + (
+            " (uncommitted changes)" if r.get("git_dirty") else ""
+        )
+        lines.append(
+            f"run {run_label(runs, rid)}: `{r['command']}`; profile **{r['profile']}**, seed {r['seed']}"
+            + (f", {r['members']} ensemble members" if "ensemble" in r.get("methods", []) else "")
+            + f", noise prior {r.get('noise_prior', 'vague')}; {r['date']}; machine: {m['cpus']} CPU cores "
+            f"({m['cpu_model']}), {m['torch_threads']} torch threads, device {m['device']}, "
+            f"{m['platform']}; bayespinn {r['versions'].get('bayespinn')}, git {git}"
+            + "".join(
+                f"; {k.replace('_', ' ')}: {_show(r[k])}" for k in EXTRAS if r.get(k) is not None
+            )
+        )
+    return lines
+
+
+#: study-specific provenance entries shown after the common ones
+EXTRAS = ("levels", "snr_db", "gauge", "sample_rate", "replicates", "workers")
+
+
+def _show(v) -> str:
+    if isinstance(v, dict):
+        return ", ".join(f"{k} {_show(x)}" for k, x in v.items())
+    if isinstance(v, list | tuple):
+        return ", ".join(_show(x) for x in v)
+    if v is None:
+        return "clean"
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def run_label(runs: dict, rid: str) -> str:
+    """A short label for a run id: its position among the runs (1, 2, ...), stable within one file."""
+    return str(list(runs).index(rid) + 1)
+
+
+def run_id(prov: dict) -> str:
+    return f"{prov['date']} {','.join(prov.get('methods', []))}".strip()
+
+
+# ---------------------------------------------------------------------------------------- merging
+def snr_key(v) -> tuple:
+    """Sort key: clean first, then increasing dB."""
+    return (0, 0.0) if v is None else (1, float(v))
+
+
+def method_key(k: str) -> int:
+    return METHOD_ORDER.index(k) if k in METHOD_ORDER else len(METHOD_ORDER)
+
+
+def load_table(path: Path, schema: str) -> dict:
+    """The table JSON at path, or an empty one; a file of another schema is not merged into."""
+    if path.exists():
+        try:
+            doc = json.loads(path.read_text(encoding="utf-8"))
+            if doc.get("schema") == schema:
+                doc.setdefault("rows", [])
+                doc.setdefault("runs", {})
+                return doc
+            log.warning(
+                "warning: %s has schema %r, not %r: starting a new table",
+                path,
+                doc.get("schema"),
+                schema,
+            )
+        except (OSError, json.JSONDecodeError) as exc:
+            log.warning("warning: %s is unreadable (%s): starting a new table", path, exc)
+    return {"schema": schema, "rows": [], "runs": {}}
+
+
+def merge(
+    doc: dict, new_rows: list[dict], prov: dict, key: tuple[str, ...], sort: Callable
+) -> dict:
+    """Replace the rows of doc that share `key` with a new row, add the rest, record the run and
+    drop runs no row refers to any more. Returns doc (changed in place)."""
+    rid = run_id(prov)
+    doc["runs"][rid] = prov
+    for r in new_rows:
+        r["run"] = rid
+    fresh = {tuple(_hashable(r[k]) for k in key) for r in new_rows}
+    kept = [r for r in doc["rows"] if tuple(_hashable(r[k]) for k in key) not in fresh]
+    doc["rows"] = sorted(kept + new_rows, key=sort)
+    used = {r["run"] for r in doc["rows"]}
+    doc["runs"] = {k: v for k, v in doc["runs"].items() if k in used}
+    return doc
+
+
+def _hashable(v):
+    return None if v is None else (float(v) if isinstance(v, int | float) else v)
+
+
+def runs_in_order(doc: dict) -> list[str]:
+    return list(doc["runs"])
+
+
+# ------------------------------------------------------------------------------------------- files
+def jsonable(obj):
+    """JSON-safe copy: numpy scalars and arrays to Python, NaN and inf to null."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.bool_ | bool):
+        return bool(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.floating | float):
+        v = float(obj)
+        return v if math.isfinite(v) else None
+    return obj
+
+
+def write_json(path: Path, obj: dict) -> None:
+    atomic_write_text(path, json.dumps(jsonable(obj), indent=2) + "\n")
+
+
+def write_markdown(path: Path, blocks: list) -> None:
+    from bayespinn.report.markdown import render_markdown
+
+    atomic_write_text(path, render_markdown(blocks))
+
+
+# ------------------------------------------------------------------------------------------ display
+def snr_text(v) -> str:
+    return "clean" if v is None else f"{snr_label(v)} dB"
+
+
+def kN(v: float | None) -> str:
+    """EI [N m^2] shown in kN m^2 with thousands separators, as the paper prints it."""
+    if v is None or not math.isfinite(v):
+        return "n/a"
+    return f"{v / 1e3:,.0f}"
+
+
+def kN_interval(ci) -> str:
+    if not ci or ci[0] is None or ci[1] is None:
+        return "n/a"
+    return f"[{kN(ci[0])}, {kN(ci[1])}]"
+
+
+def yes_no(b) -> str:
+    return "n/a" if b is None else ("yes" if b else "**no**")
+
+
+def inside(ci, v) -> bool | None:
+    if v is None or not ci or ci[0] is None or ci[1] is None:
+        return None
+    return bool(ci[0] <= v <= ci[1])
+
+
+def key_of(method: str) -> str:
+    """Summary key of a CLI method name."""
+    return KEYS[method]

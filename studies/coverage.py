@@ -1,0 +1,243 @@
+"""Do the credible intervals mean what they say? Coverage of the true EI over independent datasets.
+
+For each method and SNR level (default 10 and 30 dB, deflection case), `bayespinn.uq.coverage.
+coverage_study` draws --replicates datasets (fresh sample points and noise, seeded by replicate), runs
+the method on each and counts the replicates whose central 90 % interval holds the true EI. The table
+gives the hits, the coverage with its exact 95 % confidence interval, the 99 % binomial acceptance
+region of the hits for a calibrated method (`binomial_acceptance`: outside it, the intervals are
+miscalibrated at a 1 % false-alarm rate), the rank-uniformity p value, the mean relative error, the
+mean posterior sd and the run time. Each study's full JSON (the `bayespinn coverage` schema, with the
+per-replicate records) goes into <out>/coverage/<method>-snr<S>.json.
+
+    python studies/coverage.py --methods modal --out reports/paper
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import common as c
+
+from bayespinn.config import preset, snr_label
+from bayespinn.errors import InputError
+from bayespinn.executor import Executor
+from bayespinn.report.document import Alert, BulletList, Heading, Paragraph, table
+from bayespinn.report.units import fmt_pct, name
+from bayespinn.uq.coverage import binomial_acceptance, coverage_study
+
+log = logging.getLogger("studies.coverage")
+
+SCHEMA = "bayespinn.studies.coverage/1"
+LEVELS = "10,30"
+#: replicates per method by default: the modal reference is cheap, PINN methods are not
+REPLICATES = {"modal": 200, "ensemble": 30, "bpinn": 20}
+#: false-failure rate of the acceptance region
+FALSE_FAILURE = 0.01
+
+
+def replicates_of(text: str | None, methods: list[str]) -> dict[str, int]:
+    """'4' (every method) or 'modal=200,ensemble=30' (the rest keep their defaults)."""
+    out = {m: REPLICATES[m] for m in methods}
+    if not text:
+        return out
+    for part in text.split(","):
+        k, _, v = part.strip().rpartition("=")
+        try:
+            n = int(v)
+        except ValueError:
+            raise InputError(
+                "--replicates", text, "an integer, or method=N pairs such as modal=200,ensemble=30"
+            ) from None
+        if n < 1:
+            raise InputError("--replicates", text, "replicate counts >= 1")
+        if k:
+            if k not in REPLICATES:
+                raise InputError("--replicates", text, "method names among modal, ensemble, bpinn")
+            if k in out:
+                out[k] = n
+        else:
+            out = dict.fromkeys(out, n)
+    return out
+
+
+def sort_key(r: dict) -> tuple:
+    return (c.method_key(r["method"]), c.snr_key(r["snr_db"]))
+
+
+def blocks(doc: dict) -> list:
+    body, alerts = [], []
+    for r in doc["rows"]:
+        lo, hi = r["acceptance_99"]
+        ok = lo <= r["hits"] <= hi
+        if not ok:
+            alerts.append(
+                Alert(
+                    f"{name(r['method'])} at {c.snr_text(r['snr_db'])}: {r['hits']} hits of {r['replicates']} lie "
+                    f"outside the 99 % acceptance region [{lo}, {hi}]: its {100 * r['level']:.0f} % intervals are "
+                    "**miscalibrated**"
+                    + (" (too narrow: overconfident)." if r["hits"] < lo else " (too wide).")
+                )
+            )
+        conv = r.get("converged_fraction")
+        body.append(
+            (
+                name(r["method"]),
+                c.snr_text(r["snr_db"]),
+                str(r["replicates"]),
+                str(r["hits"]),
+                f"{r['coverage']:.3f}",
+                f"[{r['coverage_ci95'][0]:.3f}, {r['coverage_ci95'][1]:.3f}]",
+                f"[{lo}, {hi}]",
+                "yes" if ok else "**no**",
+                "n/a" if r["rank_uniformity_p"] is None else f"{r['rank_uniformity_p']:.3f}",
+                fmt_pct(r["mean_rel_error_pct"]),
+                f"{r['mean_sd_rel_pct']:.3f} %",
+                "n/a" if conv is None else f"{100 * conv:.0f} %",
+                f"{r['runtime_s']:.0f}",
+                c.run_label(doc["runs"], r["run"]),
+            )
+        )
+    out = [
+        Heading("Coverage of the true EI by the credible intervals", 1),
+        Paragraph(
+            "Deflection case (case study 1). For each method and SNR: independent synthetic datasets (fresh "
+            "random sample points and noise per replicate, the true EI fixed); 'hits': replicates whose "
+            "central interval contains the true EI. A calibrated method's hits follow Binomial(n, level); the "
+            f"acceptance region holds them with probability {100 * (1 - FALSE_FAILURE):.0f} %. Coverage CI: "
+            "exact (Clopper-Pearson) 95 %. Rank uniformity: Kolmogorov-Smirnov p value of the truth's rank "
+            "among the posterior draws (small p: the posterior is biased or mis-sized even if the hits pass). "
+            "Mean sd: the posterior sd of EI relative to the truth, averaged."
+        ),
+        *alerts,
+        table(
+            (
+                "method",
+                "SNR",
+                "replicates",
+                "hits",
+                "coverage",
+                "coverage 95 % CI",
+                "99 % acceptance (hits)",
+                "calibrated",
+                "rank-uniformity p",
+                "mean rel. error",
+                "mean sd / EI",
+                "converged",
+                "runtime (s)",
+                "run",
+            ),
+            body,
+            f"Credible level {100 * doc['rows'][0]['level']:.0f} %." if doc["rows"] else "",
+        ),
+    ]
+    if any(r["method"] == "modal_mcmc" for r in doc["rows"]):
+        out.append(
+            Paragraph(
+                "The modal reference runs each replicate with the coverage sampler settings of "
+                "`MCMCSettings.for_coverage()` (the same for every profile)."
+            )
+        )
+    missing = [k for k in c.METHOD_ORDER if k not in {r["method"] for r in doc["rows"]}]
+    if missing:
+        out.append(
+            Paragraph(
+                "Not run yet: "
+                + ", ".join(name(k) for k in missing)
+                + " (add them with `--methods`; existing rows are kept)."
+            )
+        )
+    out += [
+        Heading("Files"),
+        BulletList(
+            (
+                "`coverage.json`: these rows (SI units);",
+                "`coverage/<method>-snr<S>.json`: each study in the `bayespinn coverage` schema, with the "
+                "per-replicate records (interval, rank, relative error).",
+            )
+        ),
+        Heading("Provenance"),
+        BulletList(tuple(c.provenance_lines(doc["runs"], list(doc["runs"])))),
+    ]
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    p = c.parser("Coverage of the true EI by each method's credible intervals (deflection case).")
+    p.add_argument("--snr", default=LEVELS, help=f"comma list of levels in dB (default {LEVELS})")
+    p.add_argument(
+        "--replicates",
+        default=None,
+        help="N for every method, or method=N pairs (default modal=200, ensemble=30, bpinn=20)",
+    )
+    p.add_argument("--level", type=float, default=0.9, help="credible level (default 0.9)")
+    p.add_argument(
+        "--workers", type=int, default=None, help="local worker processes (default one per core)"
+    )
+    args = p.parse_args(argv)
+    c.setup_logging(args.quiet)
+    methods = c.methods_of(args.methods)
+    levels = c.levels_of(args.snr)
+    if any(v is None for v in levels):
+        raise InputError("--snr", args.snr, "levels in dB (clean data have no noise to cover)")
+    if not 0.0 < args.level < 1.0:
+        raise InputError("--level", args.level, "a credible level in (0, 1)")
+    reps = replicates_of(args.replicates, methods)
+    cfg = preset("deflection")
+    out = Path(args.out)
+    keys = [c.key_of(m) for m in methods]
+    executor = Executor("local", args.workers)
+    prov = c.provenance(
+        __file__,
+        argv,
+        args,
+        methods=keys,
+        levels=levels,
+        replicates=reps,
+        workers=args.workers or c.cpu_count(),
+    )
+    new_rows = []
+    for m, key in zip(methods, keys, strict=True):
+        for snr in levels:
+            log.info("coverage: %s at %s dB, %d replicates", key, snr_label(snr), reps[m])
+            res = coverage_study(
+                m,
+                cfg,
+                snr,
+                replicates=reps[m],
+                level=args.level,
+                seed=args.seed,
+                opts=replace(c.run_options(args, snr), progress=False),
+                executor=executor,
+                progress=not args.quiet,
+            )
+            c.write_json(out / "coverage" / f"{key}-snr{snr_label(snr)}.json", res)
+            row = {k: v for k, v in res.items() if k != "records"}
+            row["acceptance_99"] = list(
+                binomial_acceptance(res["replicates"], args.level, FALSE_FAILURE)
+            )
+            row["file"] = f"coverage/{key}-snr{snr_label(snr)}.json"
+            new_rows.append(row)
+            log.info(
+                "coverage: %s at %s dB: %d / %d hits (acceptance [%d, %d]), %.0f s",
+                key,
+                snr_label(snr),
+                row["hits"],
+                row["replicates"],
+                *row["acceptance_99"],
+                row["runtime_s"],
+            )
+    doc = c.load_table(out / "coverage.json", SCHEMA)
+    doc.update(case="deflection", truth={"EI": cfg.beam.EI})
+    c.merge(doc, new_rows, prov, ("snr_db", "method"), sort_key)
+    c.write_json(out / "coverage.json", doc)
+    c.write_markdown(out / "coverage.md", blocks(doc))
+    log.info("wrote %s and %s", out / "coverage.md", out / "coverage.json")
+    return 0
+
+
+if __name__ == "__main__":
+    c.entry(main)

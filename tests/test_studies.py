@@ -1,0 +1,279 @@
+"""The study scripts run end to end with tiny arguments (numpyro-examples style), so they never rot.
+
+Each script is run as a subprocess, as a user would, into tmp_path with the smoke profile and the modal
+reference (seconds); the PINN methods' smoke runs take about a minute and are marked slow.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+STUDIES = REPO / "studies"
+#: a subprocess that takes longer than this has hung (the slowest fast-tier script takes ~20 s)
+TIMEOUT_S = 300
+
+
+def study(script: str, *args: str, expect: int = 0) -> subprocess.CompletedProcess:
+    r = subprocess.run(
+        [sys.executable, str(STUDIES / script), *args],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+        env={**os.environ, "MPLBACKEND": "Agg"},
+    )
+    assert r.returncode == expect, (
+        f"{script} {' '.join(args)} exited {r.returncode}\n{r.stderr[-4000:]}"
+    )
+    return r
+
+
+def load(path: Path) -> dict:
+    assert path.exists(), f"{path} not written"
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def assert_provenance(md: str, script: str) -> None:
+    """The Markdown says how it was made: command, profile, seed, date, machine."""
+    assert f"python studies/{script}" in md
+    assert "profile **smoke**" in md and "seed 0" in md
+    assert "CPU cores" in md and "torch threads" in md
+    assert "20" in md.split("## Provenance", 1)[1]  # the date
+
+
+@pytest.fixture(scope="module")
+def studies_lib():
+    sys.path.insert(0, str(STUDIES))
+    try:
+        import common
+
+        yield common
+    finally:
+        sys.path.remove(str(STUDIES))
+
+
+def test_table4_then_table5_modal(tmp_path):
+    study(
+        "table4.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "modal",
+        "--snr",
+        "clean,30",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
+    doc = load(tmp_path / "table4.json")
+    assert doc["schema"] == "bayespinn.studies.table4/1"
+    assert [(r["snr_db"], r["method"]) for r in doc["rows"]] == [
+        (None, "modal_mcmc"),
+        (30.0, "modal_mcmc"),
+    ]
+    for r in doc["rows"]:
+        e = r["EI"]
+        assert e["ci95"][0] <= e["ci90"][0] <= e["mean"] <= e["ci90"][1] <= e["ci95"][1]
+        assert isinstance(r["truth_in_ci90"], bool) and math.isfinite(e["rel_error_pct"])
+        assert r["paper"]["EI"] > 1e9 and (tmp_path / r["folder"] / "summary.json").exists()
+    for f in (
+        "table4/sweep.json",
+        "table4/report.md",
+        "table4/report.html",
+        "table4/modal_mcmc/sweep.json",
+    ):
+        assert (tmp_path / f).exists(), f
+    md = (tmp_path / "table4.md").read_text(encoding="utf-8")
+    assert (
+        "1,036,091" in md and "1,033,610" in md
+    )  # the paper's clean estimate and the truth, in kN m^2
+    assert_provenance(md, "table4.py")
+
+    # Table 5 reuses table4's data and gets the very same posterior back
+    study(
+        "table5.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "modal",
+        "--snr",
+        "30",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
+    t5 = load(tmp_path / "table5.json")
+    (row,) = t5["rows"]
+    assert row["snr_db"] == 30.0 and row["same_posterior_as_table4"] is True
+    assert [round(x["t"], 2) for x in row["table5"]["rows"]] == [0.60, 1.22, 1.82]
+    for x in row["table5"]["rows"]:
+        for q in ("deflection", "moment"):
+            assert x[q]["rmse"] >= 0 and 0.0 <= x[q]["coverage"] <= 1.0
+    assert_provenance((tmp_path / "table5.md").read_text(encoding="utf-8"), "table5.py")
+
+
+def test_table6_modal_with_and_without_data(tmp_path):
+    study(
+        "table6.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "modal",
+        "--sample-rate",
+        "50",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
+    doc = load(tmp_path / "table6.json")
+    rows = {r["scenario"]: r for r in doc["rows"]}
+    assert rows["data"]["gauges"] == ["S2"] and rows["data"]["identified"] is True
+    assert rows["none"]["rows"] == 0 and rows["none"]["identified"] is False
+    assert (tmp_path / rows["data"]["folder"] / "report.md").exists()
+    md = (tmp_path / "table6.md").read_text(encoding="utf-8")
+    assert "EI is not identified by these data" in md
+    assert_provenance(md, "table6.py")
+
+
+def test_coverage_modal(tmp_path):
+    study(
+        "coverage.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "modal",
+        "--snr",
+        "30",
+        "--replicates",
+        "3",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
+    doc = load(tmp_path / "coverage.json")
+    (row,) = doc["rows"]
+    assert row["replicates"] == 3 and 0 <= row["hits"] <= 3
+    lo, hi = row["acceptance_99"]
+    assert 0 <= lo <= hi <= 3
+    full = load(tmp_path / row["file"])
+    assert full["schema"] == "bayespinn.coverage/1" and len(full["records"]) == 3
+    assert_provenance((tmp_path / "coverage.md").read_text(encoding="utf-8"), "coverage.py")
+
+
+def test_bad_method_is_bad_usage(tmp_path):
+    r = study("table4.py", "--methods", "nonsense", "--out", str(tmp_path), expect=2)
+    assert "--method" in r.stderr
+    assert not (tmp_path / "table4.json").exists()
+
+
+def test_merge_replaces_rows_of_the_rerun_methods_only(studies_lib):
+    c = studies_lib
+
+    def sort(r):
+        return (c.snr_key(r["snr_db"]), c.method_key(r["method"]))
+
+    doc = {"schema": "s", "rows": [], "runs": {}}
+    p1 = {"date": "d1", "methods": ["modal_mcmc"]}
+    c.merge(
+        doc,
+        [
+            {"snr_db": 10.0, "method": "modal_mcmc", "v": 1},
+            {"snr_db": None, "method": "modal_mcmc", "v": 1},
+        ],
+        p1,
+        ("snr_db", "method"),
+        sort,
+    )
+    p2 = {"date": "d2", "methods": ["ensemble"]}
+    c.merge(doc, [{"snr_db": 10.0, "method": "ensemble", "v": 2}], p2, ("snr_db", "method"), sort)
+    assert [(r["snr_db"], r["method"]) for r in doc["rows"]] == [
+        (None, "modal_mcmc"),
+        (10.0, "modal_mcmc"),
+        (10.0, "ensemble"),
+    ]
+    p3 = {"date": "d3", "methods": ["modal_mcmc"]}
+    c.merge(doc, [{"snr_db": 10, "method": "modal_mcmc", "v": 3}], p3, ("snr_db", "method"), sort)
+    assert [r["v"] for r in doc["rows"]] == [1, 3, 2]
+    assert len(doc["runs"]) == 3
+    p4 = {"date": "d4", "methods": ["modal_mcmc"]}
+    c.merge(doc, [{"snr_db": None, "method": "modal_mcmc", "v": 4}], p4, ("snr_db", "method"), sort)
+    assert set(doc["runs"]) == {c.run_id(p) for p in (p2, p3, p4)}  # run 1 no longer has rows
+
+
+def test_replicates_option(studies_lib):
+    # loaded under another name: `coverage` is also the name of a well-known package
+    spec = importlib.util.spec_from_file_location("studies_coverage", STUDIES / "coverage.py")
+    cov_script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(cov_script)
+    assert cov_script.replicates_of(None, ["modal", "bpinn"]) == {"modal": 200, "bpinn": 20}
+    assert cov_script.replicates_of("4", ["modal", "ensemble"]) == {"modal": 4, "ensemble": 4}
+    assert cov_script.replicates_of("ensemble=7", ["modal", "ensemble"]) == {
+        "modal": 200,
+        "ensemble": 7,
+    }
+
+
+@pytest.mark.slow
+def test_table4_pinn_rows_merge_with_modal(tmp_path):
+    study(
+        "table4.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "modal",
+        "--snr",
+        "30",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
+    study(
+        "table4.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "ensemble",
+        "--members",
+        "2",
+        "--snr",
+        "30",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
+    doc = load(tmp_path / "table4.json")
+    assert [r["method"] for r in doc["rows"]] == ["modal_mcmc", "ensemble"]
+    assert len(doc["runs"]) == 2
+    sweep = load(tmp_path / "table4" / "sweep.json")
+    assert set(sweep["levels"][0]["methods"]) == {"modal_mcmc", "ensemble"}
+
+
+@pytest.mark.slow
+def test_table6_pinn_methods_without_data_do_not_crash(tmp_path):
+    study(
+        "table6.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "ensemble,bpinn",
+        "--members",
+        "2",
+        "--sample-rate",
+        "50",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
+    doc = load(tmp_path / "table6.json")
+    for r in doc["rows"]:
+        if r["scenario"] == "none":
+            assert "error" in r or r["identified"] is False
