@@ -14,39 +14,46 @@ from bayespinn.uq.sampler import MCMCSettings
 SMALL = RunOptions(profile="smoke", mcmc=MCMCSettings(n_walkers=8, n_groups=2, min_steps=250, tau_factor=5.0))
 
 
-#: Agreement of two runs of the same replicate in two kinds of worker process, in posterior sds.
-#: Bit-for-bit equality is not promised across process types: numpy's SIMD reductions can round the
-#: last bit differently with the memory alignment of an array, and a few thousand MCMC steps amplify
-#: that into a different (equally valid) chain. What must agree is the seeded *dataset* and the
-#: posterior up to Monte Carlo error: these tiny chains have ESS ~80, so a mean moves by ~0.11 sd and a
-#: 90 % endpoint by ~0.2 sd between two such chains; 0.5 sd is far outside that and far inside the gap
-#: to a different dataset (replicates differ by ~1 sd).
-SAME_TOL_SD = 0.5
-
-
-def _same(a, b):
-    """Two coverage studies agree replicate by replicate (see SAME_TOL_SD)."""
-    assert len(a["records"]) == len(b["records"])
-    for ra, rb in zip(a["records"], b["records"], strict=True):
-        assert ra["EI_true"] == rb["EI_true"]
-        sd = ra["sd_rel_pct"] / 100 * ra["EI_true"]
-        tol = SAME_TOL_SD * sd
-        assert abs(ra["rel_error_pct"] - rb["rel_error_pct"]) < SAME_TOL_SD * ra["sd_rel_pct"]
-        for ea, eb in zip(ra["interval"], rb["interval"], strict=True):
-            assert abs(ea - eb) < tol
-        # a hit may only differ if the truth lies within the tolerance of an endpoint
-        near = min(abs(e - ra["EI_true"]) for e in ra["interval"]) < tol
-        assert ra["hit"] == rb["hit"] or near
+def _strip(res):
+    return [(r["hit"], r["rel_error_pct"], r["interval"]) for r in res["records"]]
 
 
 def _study(executor):
     return coverage_study("modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, executor=executor, progress=False)
 
 
+def _warm_parent_cache():
+    """Compute the FE crossing in this process with two BLAS threads first: forked workers inherit the
+    cache, Ray workers do not, so this is the situation in which a thread-dependent result would show
+    (it did in CI before the FE solve was pinned to one thread)."""
+    from threadpoolctl import threadpool_limits
+
+    from bayespinn.physics.fem import solve_crossing
+
+    cfg = preset()
+    with threadpool_limits(2):
+        solve_crossing(cfg.beam, cfg.vehicle)
+
+
+def test_fe_solution_does_not_depend_on_blas_threads():
+    from threadpoolctl import threadpool_limits
+
+    from bayespinn.physics.fem import FEBeam
+
+    cfg = preset()
+    T = cfg.vehicle.duration(cfg.beam.length)
+    out = []
+    for n in (1, 2):
+        with threadpool_limits(n):
+            out.append(FEBeam(cfg.beam).solve(cfg.vehicle, T).U)
+    assert (out[0] == out[1]).all()
+
+
 def test_local_results_do_not_depend_on_workers():
+    _warm_parent_cache()
     one = _study(Executor("local", workers=1))
     two = _study(Executor("local", workers=2))
-    _same(one, two)
+    assert _strip(one) == _strip(two)
 
 
 def test_bad_executor_is_input_error():
@@ -56,24 +63,16 @@ def test_bad_executor_is_input_error():
         Executor("dask")
 
 
-def test_agreement_check_has_teeth():
-    """Negative control: the same study with a different seed (other datasets) must not pass `_same`."""
-    a = _study(Executor("local", workers=2))
-    b = coverage_study("modal", preset(), 10.0, replicates=4, seed=4, opts=SMALL, executor=Executor("local", workers=2),
-                       progress=False)
-    with pytest.raises(AssertionError):
-        _same(a, b)
-
-
 @pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="Ray is not installed (pip install 'bayespinn[ray]')")
 def test_ray_matches_local():
     import ray
 
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, ignore_reinit_error=True)
     try:
+        _warm_parent_cache()
         local = _study(Executor("local", workers=2))
         remote = _study(Executor("ray"))
-        _same(local, remote)
+        assert _strip(local) == _strip(remote)
     finally:
         ray.shutdown()
 

@@ -25,6 +25,7 @@ import scipy.linalg as sla
 
 from ..config import Beam, Vehicle
 from ..errors import InputError
+from ..threads import one_blas_thread
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,7 @@ class FEBeam:
     settings : elements and steps.
     """
 
+    @one_blas_thread
     def __init__(self, beam: Beam, settings: FESettings | None = None):
         self.beam = beam
         self.settings = settings or FESettings()
@@ -114,6 +116,7 @@ class FEBeam:
         """Integrate a crossing from rest over [0, t_end] [s] with Newmark average acceleration."""
         return self.solve_forced(lambda t: self.load_vector(vehicle, t), t_end, self.settings.n_steps)
 
+    @one_blas_thread
     def solve_forced(self, force, t_end: float, n: int) -> FEResponse:
         """Integrate from rest under force(t) -> free-dof load vector, n Newmark steps over [0, t_end]."""
         dt = t_end / n
