@@ -277,3 +277,18 @@ def test_table6_pinn_methods_without_data_do_not_crash(tmp_path):
     for r in doc["rows"]:
         if r["scenario"] == "none":
             assert "error" in r or r["identified"] is False
+
+
+def test_check_quadrature_accepts_the_modal_reference_and_rejects_a_wrong_one(tmp_path):
+    """The issue's acceptance check on a real run folder; negative control: the same run checked
+    against a bridge with a different true mass (so a different exact posterior) must fail."""
+    run = tmp_path / "run"
+    r = subprocess.run([sys.executable, "-m", "bayespinn", "run", "--snr", "20", "--method", "modal", "--seed", "5",
+                        "--out", str(run), "--quiet"], cwd=REPO, capture_output=True, text=True, timeout=TIMEOUT_S)
+    assert r.returncode == 0, r.stderr
+    ok = study("check_quadrature.py", str(run))
+    assert "meets the acceptance" in ok.stdout
+    heavy = tmp_path / "heavy.toml"
+    heavy.write_text("[beam]\nmass_per_length = 400.0\n")
+    bad = study("check_quadrature.py", str(run), "--config", str(heavy), expect=1)
+    assert "MISSES" in bad.stdout
