@@ -76,6 +76,9 @@ def alerts(summary: dict) -> list[Block]:
                     "its intervals are approximate. See Diagnostics."
                 )
             )
+    for key, m in summary["methods"].items():
+        for w in m.get("warnings") or []:
+            out.append(Alert(f"{name(key)}: {w}"))
     for v in agreement(summary["methods"]):
         if v.agrees is False:
             out.append(Alert(v.sentence()))

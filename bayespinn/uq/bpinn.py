@@ -147,7 +147,8 @@ def bpinn_posterior(
 def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posterior:
     model = res.model("cpu")
     rng = np.random.default_rng(seeding.stream(seed, "collocation"))
-    ll = LastLayer(model, 0, problem, data, rng, n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic)
+    ll = LastLayer(model, 0, problem, data, rng, n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
+                   beta_rel=settings.beta_rel, images=settings.images)
     ei_prior = EIPrior.from_spec(cfg.prior)
     # EI = EI_ref theta / beta_factor
     shift = math.log(problem.EI_ref) - math.log(res.beta_factor)
@@ -172,9 +173,22 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
     info = {"variant": VARIANT, "identified": ident}
     if not ident:
         info["note"] = "EI is not identified by these data"
+    # self-check: the last-layer posterior linearises around the fit; it must stay near it
+    moved = abs(float(log_ei.mean()) - math.log(res.EI)) / max(float(log_ei.std()), 1e-12)
+    diag["moved_from_fit_sd"] = moved
+    if moved > MAX_MOVE_SD:
+        msg = (f"the last-layer posterior (EI mean {float(EI.mean()):.4g} N m^2) lies {moved:.1f} posterior sd from the "
+               f"PINN fit it is built on ({float(res.EI):.4g} N m^2): the network has not learnt the physics well "
+               "enough for this approximation, so this interval is not trustworthy")
+        warnings.warn("B-PINN: " + msg, RuntimeWarning, stacklevel=2)
+        info["warnings"] = [msg]
     pred = LastLayerPredictor(ll, draws[:, :, 0].ravel(), draws[:, :, 1].ravel(), shift)
     return Posterior("bpinn", EI, sigma, diagnostics=diag, info=info, runtime_s=time.perf_counter() - t0,
                      predictor=pred)
+
+
+#: a last-layer posterior further than this many of its own sds from the fit it linearises is flagged
+MAX_MOVE_SD = 3.0
 
 
 class LastLayerPredictor:

@@ -43,6 +43,9 @@ LAPLACE_DOF = 4
 RTO_FRACTION = 0.4
 #: posterior draws stored
 N_DRAWS = 4000
+#: members scattering more than this many times their own Laplace sd are flagged as not converged
+#: (with 5 members the sample sd is itself uncertain by ~35 %, so 3x is far outside chance)
+MAX_SCATTER_RATIO = 3.0
 
 
 def _rto_data(data: Measurements, sigma: float, M: int, rng: np.random.Generator) -> tuple[Measurements, ...]:
@@ -104,7 +107,8 @@ def ensemble_posterior(
         for m in range(M):
             with torch_threads(1):
                 ll = LastLayer(model, m, base, data, np.random.default_rng(seeding.child(seed, "collocation", m)),
-                               n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic)
+                               n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
+                               beta_rel=settings.beta_rel, images=settings.images)
                 lap_sd[m] = ll.laplace_sd_log_theta(math.log(ll.theta_fit), 0.5 * math.log(rss[m] / n), ei_prior.log_sd)
             lls.append(ll)
     between = float(np.var(log_ei_m, ddof=1)) if M > 1 else 0.0
@@ -134,6 +138,14 @@ def ensemble_posterior(
         info["note"] = "a single member has no spread: its interval is its own Laplace width only"
     if not ident:
         info["note"] = "EI is not identified by these data"
+    # self-check: members that scatter far more than each one's own (Laplace) uncertainty have not
+    # converged to the same answer; the pooled interval then mostly measures optimisation scatter
+    if M > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var:
+        msg = (f"the members disagree: their EI spread (sd {math.sqrt(between):.3f} in log EI) is "
+               f"{math.sqrt(between / lap_var):.1f} x each member's own uncertainty ({math.sqrt(lap_var):.3f}); "
+               "training has not converged to one answer, so this interval mostly measures optimisation scatter")
+        log.warning("[ensemble] %s", msg)
+        info["warnings"] = [msg]
     diag = {"fit_runtime_s": r1.runtime_s + r2.runtime_s, "beta_factor": r2.beta_factor}
     predictor = None
     if lls:

@@ -68,6 +68,7 @@ class LastLayer:
     model : trained PINN; member : which of its members
     problem : the Problem it was trained on (scales, load); data : the measurements to explain (SI)
     n_pde, n_bc, n_ic : pseudo-observation points (uniform grid-free random, from `rng`)
+    beta_rel, images : the Gaussian load as the PINN was trained on it (`TrainSettings.beta_rel`, `.images`)
     """
 
     def __init__(
@@ -81,6 +82,7 @@ class LastLayer:
         n_bc: int = 400,
         n_ic: int = 400,
         beta_rel: float | None = None,
+        images: bool = False,
     ):
         self.model, self.member, self.problem = model, member, problem
         sc = problem.scales
@@ -100,7 +102,7 @@ class LastLayer:
         jf = feature_jet(model, member, xi_f, tau_f, 4, 2)
         P4 = pt.stiffness * _aug(jf.dx(4), 0.0)
         P2 = pt.inertia * _aug(jf.dt(2), 0.0)
-        f = moving_load(xi_f.unsqueeze(0), tau_f.unsqueeze(0), pt)[0]
+        f = moving_load(xi_f.unsqueeze(0), tau_f.unsqueeze(0), pt, images)[0]
         # boundary (u = u_xx = 0 at both ends) and initial (u = u_t = 0) pseudo-observations
         tb = T(rng.uniform(0, 1, n_bc))
         rows_b = []
