@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -52,7 +53,7 @@ def cmd_run(args) -> int:
 def cmd_coverage(args) -> int:
     from .data.measurements import atomic_write_text
     from .uq.coverage import coverage_study
-    from .uq.posterior import _jsonable
+    from .uq.posterior import jsonable
 
     if args.snr is None:
         raise InputError("--snr", None, "'clean' or a finite number of dB > 0 (required for coverage)")
@@ -69,7 +70,7 @@ def cmd_coverage(args) -> int:
         method, cfg, snr, replicates=args.replicates, level=args.level, seed=args.seed, truth=args.truth,
         opts=replace(opts, executor=None), executor=opts.executor, progress=not args.quiet,
     )
-    atomic_write_text(out, json.dumps(_jsonable(res), indent=2) + "\n")
+    atomic_write_text(out, json.dumps(jsonable(res), indent=2) + "\n")
     log.info(
         "%s coverage at %s dB: %d / %d = %.3f (95%% CI [%.3f, %.3f]), rank-uniformity p = %.3f, %.1f s -> %s",
         res["method"], args.snr, res["hits"], res["replicates"], res["coverage"], *res["coverage_ci95"],
@@ -96,13 +97,13 @@ def cmd_sweep(args) -> int:
 def cmd_bench(args) -> int:
     from .bench import bench
     from .data.measurements import atomic_write_text
-    from .uq.posterior import _jsonable
+    from .uq.posterior import jsonable
 
     device = resolve_device(args.device)
     res = bench(device=device, progress=not args.quiet)
-    text = json.dumps(_jsonable(res), indent=2) + "\n"
+    text = json.dumps(jsonable(res), indent=2) + "\n"
     if args.out:
         atomic_write_text(args.out, text)
     else:
-        print(text, end="")
+        sys.stdout.write(text)
     return 0

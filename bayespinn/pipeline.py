@@ -23,7 +23,7 @@ from .data.measurements import Measurements, read_csv
 from .data.synthetic import realised_snr, sigma_for_snr, simulate
 from .errors import InputError
 from .uq.methods import KEYS, RunOptions, infer
-from .uq.posterior import Posterior, _jsonable
+from .uq.posterior import Posterior, jsonable
 
 log = logging.getLogger(__name__)
 
@@ -184,4 +184,4 @@ def run(
 
 
 def _write_json(path: Path, obj: dict) -> None:
-    path.write_text(json.dumps(_jsonable(obj), indent=2) + "\n", encoding="utf-8")
+    path.write_text(json.dumps(jsonable(obj), indent=2) + "\n", encoding="utf-8")

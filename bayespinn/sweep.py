@@ -10,7 +10,7 @@ from .config import Config, snr_label
 from .data.measurements import atomic_write_text
 from .pipeline import run
 from .uq.methods import RunOptions
-from .uq.posterior import _jsonable
+from .uq.posterior import jsonable
 
 log = logging.getLogger(__name__)
 
@@ -30,5 +30,5 @@ def sweep(cfg: Config, *, levels: list, methods: list[str], seed: int, out: Path
     from .report.sweep import write_sweep_reports
 
     write_sweep_reports(doc, results, out, cfg=cfg)
-    atomic_write_text(out / "sweep.json", json.dumps(_jsonable(doc), indent=2) + "\n")
+    atomic_write_text(out / "sweep.json", json.dumps(jsonable(doc), indent=2) + "\n")
     return doc

@@ -21,8 +21,6 @@ import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-import numpy as np
-
 from bayespinn.cli import parse_methods, resolve_device
 from bayespinn.config import parse_snr, snr_label
 from bayespinn.data.measurements import atomic_write_text
@@ -30,6 +28,7 @@ from bayespinn.errors import InputError
 from bayespinn.executor import cpu_count
 from bayespinn.pipeline import git_commit, versions
 from bayespinn.uq.methods import KEYS, RunOptions
+from bayespinn.uq.posterior import jsonable
 
 log = logging.getLogger("studies")
 
@@ -283,22 +282,6 @@ def runs_in_order(doc: dict) -> list[str]:
 
 
 # ------------------------------------------------------------------------------------------- files
-def jsonable(obj):
-    """JSON-safe copy: numpy scalars and arrays to Python, NaN and inf to null."""
-    if isinstance(obj, dict):
-        return {str(k): jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return jsonable(obj.tolist())
-    if isinstance(obj, np.bool_ | bool):
-        return bool(obj)
-    if isinstance(obj, np.integer):
-        return int(obj)
-    if isinstance(obj, np.floating | float):
-        v = float(obj)
-        return v if math.isfinite(v) else None
-    return obj
 
 
 def write_json(path: Path, obj: dict) -> None:

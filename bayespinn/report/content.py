@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import json
-import math
 
 import numpy as np
 
 from ..config import Config, snr_label
+from ..uq.posterior import jsonable
 from .agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement, caveats
 from .document import Alert, Block, BulletList, Code, Figure, Heading, Paragraph, table
 from .figures import FigureFile
@@ -371,18 +371,6 @@ def table5_section(table5s: list[dict], notes: list[str]) -> list[Block]:
     return out
 
 
-def _jsonable(o):
-    if isinstance(o, float) and not math.isfinite(o):
-        return None
-    if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items()}
-    if isinstance(o, list | tuple):
-        return [_jsonable(v) for v in o]
-    if isinstance(o, np.generic):
-        return o.item()
-    return o
-
-
 def manifest_section(manifest: dict, truth_known: bool = True) -> list[Block]:
     cmd = manifest.get("command")
     cmd_s = " ".join(map(str, cmd)) if isinstance(cmd, list | tuple) else str(cmd)
@@ -412,7 +400,7 @@ def manifest_section(manifest: dict, truth_known: bool = True) -> list[Block]:
         ]
     out += [
         Heading("Resolved configuration (SI units)", 3),
-        Code(json.dumps(_jsonable(manifest.get("config", {})), indent=2), "json"),
+        Code(json.dumps(jsonable(manifest.get("config", {})), indent=2), "json"),
     ]
     return out
 

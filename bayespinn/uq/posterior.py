@@ -97,8 +97,8 @@ class Posterior:
             "sigma": summarise(self.sigma),
         }
         if self.diagnostics:
-            out["diagnostics"] = _jsonable(self.diagnostics)
-        out.update(_jsonable(self.info))
+            out["diagnostics"] = jsonable(self.diagnostics)
+        out.update(jsonable(self.info))
         out["runtime_s"] = float(self.runtime_s)
         return out
 
@@ -149,13 +149,13 @@ class Posterior:
         )
 
 
-def _jsonable(obj):
+def jsonable(obj):
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
+        return jsonable(obj.tolist())
     if isinstance(obj, np.bool_ | bool):
         return bool(obj)
     if isinstance(obj, np.integer):
