@@ -3,6 +3,7 @@
 import pytest
 import torch
 
+from bayespinn.pinn.enrich import StaticEnrichment
 from bayespinn.pinn.network import PINN
 
 #: float32 agreement: both engines round differently through 5 layers; observed ~5e-7, 1e-4 is the brief's bar
@@ -15,6 +16,9 @@ CASES = [
     dict(hard_bc=True, hard_ic=True),
     dict(time_frequency=40.0),
     dict(hard_bc=True, time_frequency=40.0),
+    dict(oscillator=40.0),
+    dict(hard_bc=True, hard_ic=True, oscillator=25.0),
+    dict(oscillator=40.0, enrichment=StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05)),
 ]
 
 
@@ -23,6 +27,9 @@ def _net(dtype, members=2, **kw):
     net = PINN(24, 3, members=members, generators=gens, dtype=dtype, **kw)
     with torch.no_grad():
         net.log_ei.copy_(torch.linspace(-0.1, 0.2, members))
+        # the modulated coefficients start at zero: make them count, or the check would be empty
+        net.osc_head.copy_(torch.randn(net.osc_head.shape, generator=gens[0], dtype=torch.float64).to(dtype))
+        net.enr_head.copy_(torch.randn(net.enr_head.shape, generator=gens[0], dtype=torch.float64).to(dtype))
     return net
 
 
@@ -57,7 +64,7 @@ def test_parameter_gradients_agree():
         loss = ((net.EI_ratio[:, None] * j.dx(4) / 48 + 0.1 * j.dt(2) - 1) ** 2).mean() + (j.dx(2) ** 2).mean()
         loss = loss + (j.dt(1) ** 2).mean() + (j.value**2).mean()
         loss.backward()
-        grads[engine] = torch.cat([p.grad.flatten() for p in net.parameters()])
+        grads[engine] = torch.cat([p.grad.flatten() for p in net.parameters() if p.numel()])
     ref = grads["autograd"]
     for engine in ("taylor", "taylor-unfused"):
         assert float((grads[engine] - ref).abs().max() / ref.abs().max()) < TOL_F64
@@ -106,3 +113,24 @@ def test_hard_constraints_hold_exactly():
         assert float(j.value.abs().max()) < 1e-12 and float(j.dx(2).abs().max()) < 1e-10
     j = net.jet(torch.rand(2, 30, dtype=torch.float64), torch.zeros(2, 30, dtype=torch.float64), 0, 1)
     assert float(j.value.abs().max()) < 1e-14 and float(j.dt(1).abs().max()) < 1e-12
+
+
+def test_static_enrichment_solves_the_gaussian_load():
+    """E_xixixixi / 48 is the Gaussian load with its images; E and E_xixi vanish at both supports."""
+    from bayespinn.pinn.losses import moving_load
+    from bayespinn.pinn.problem import ProblemTensors
+
+    enr = StaticEnrichment((0.7, 1.0), (0.0, 0.25), 1.3, 0.03)
+    g = torch.Generator().manual_seed(5)
+    xi, tau = torch.rand(1, 500, generator=g, dtype=torch.float64), torch.rand(1, 500, generator=g, dtype=torch.float64)
+    z = torch.zeros(1, dtype=torch.float64)
+    pt = ProblemTensors(xi, tau, z, z, z, False, True, None, None, torch.tensor(enr.loads, dtype=torch.float64),
+                        torch.tensor(enr.delays, dtype=torch.float64), enr.speed,
+                        torch.tensor(enr.beta_rel, dtype=torch.float64), 1 / 48, 0.0)
+    f = moving_load(xi, tau, pt, images=True)
+    j = enr.jet(xi, tau, 4, 2)
+    # series truncated where g_n < 1e-9 (enrich.SERIES_TOL); the load peaks at ~1/(beta sqrt(pi)) ~ 19
+    assert float((j.dx(4)[..., 0] / 48 - f).abs().max()) < 1e-6
+    for end in (0.0, 1.0):
+        jb = enr.jet(torch.full_like(tau, end), tau, 2, 0)
+        assert float(jb.value.abs().max()) < 1e-12 and float(jb.dx(2).abs().max()) < 1e-10

@@ -16,6 +16,17 @@ Optional hard constraints (off by default, to stay faithful to the paper):
 * ``hard_bc``: w = sin(pi xi) N(cos(pi xi), tau). The product is odd about x = 0 and about x = L, so
   u and every even x-derivative (u_xx included) vanish exactly at both supports.
 * ``hard_ic``: w = g(tau) N with g = 1 - exp(-(tau/c)^2), so w = w_tau = 0 at tau = 0.
+
+Optional modulated output (``oscillator``, off in the paper profile): the output layer combines the last
+hidden layer's features phi_j, and the same features times sin(W tau) and cos(W tau), W the first natural
+circular frequency at the current EI times T:
+
+    w = sum_j c_j phi_j + sum_j (a_j sin(W tau) + b_j cos(W tau)) phi_j.
+
+A girder crossed in 2.4 s vibrates freely at its first frequency (about 24 cycles per crossing for the
+Exeter girder, 2 % of the deflection); a tanh MLP of (x, t) alone hardly represents that, and the misfit
+then biases EI. With the modulation the slow amplitude envelopes are ordinary smooth functions of the
+network. The output stays linear in (c, a, b), so `varpro` and the last-layer B-PINN keep working.
 """
 
 from __future__ import annotations
@@ -26,6 +37,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
+from .enrich import StaticEnrichment
 from .taylor import Jet, autograd_jet, hidden_stack, mlp_jet, product_jet, unstack
 
 #: time constant of the hard initial-condition factor g(tau) = 1 - exp(-(tau/c)^2) (non-dimensional)
@@ -46,6 +58,10 @@ class PINN(nn.Module):
     hard_bc, hard_ic : exact boundary / initial conditions by construction (see module docstring)
     time_frequency : None, or omega_1(EI_ref) T [rad]: add the time features sin(W tau), cos(W tau)
         at the first natural frequency for the current EI (see `_input_jet`)
+    oscillator : None, or omega_1(EI_ref) T [rad]: the modulated output (module docstring), with
+        W = oscillator sqrt(EI / EI_ref)
+    enrichment : None, or the axles as a `enrich.StaticEnrichment`: one more output basis function, the
+        quasi-static deflection of the Gaussian loads, with its own coefficient (see `enrich`)
     dtype : torch dtype of the parameters
     """
 
@@ -60,6 +76,8 @@ class PINN(nn.Module):
         hard_bc: bool = False,
         hard_ic: bool = False,
         time_frequency: float | None = None,
+        oscillator: float | None = None,
+        enrichment: StaticEnrichment | None = None,
         dtype: torch.dtype = torch.float32,
     ):
         super().__init__()
@@ -85,6 +103,12 @@ class PINN(nn.Module):
                 self.weights[0][:, 2:] = 0.0
         init = torch.as_tensor(log_ei_init, dtype=torch.float64).expand(members).clone()
         self.log_ei = nn.Parameter(init.to(dtype))
+        self.oscillator = None if oscillator is None else float(oscillator)
+        # coefficients of the sin- and cos-modulated features (weights then bias of each), start at zero
+        n_osc = 0 if self.oscillator is None else 2 * (width + 1)
+        self.osc_head = nn.Parameter(torch.zeros(members, n_osc, dtype=dtype))
+        self.enrichment = enrichment
+        self.enr_head = nn.Parameter(torch.zeros(members, 0 if enrichment is None else 1, dtype=dtype))
 
     # ------------------------------------------------------------------ inputs and outputs
     def _input_jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet:
@@ -165,6 +189,11 @@ class PINN(nn.Module):
         if engine not in ENGINES:
             raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
         fused = engine == "taylor"
+        if self.oscillator is not None or self.enrichment is not None:
+            B = self.basis_jet(xi, tau, kx, kt, engine=engine)
+            c = self.head
+            f = lambda a: None if a is None else torch.bmm(a, c.unsqueeze(-1))[..., 0]  # noqa: E731
+            return Jet(f(B.value), tuple(f(a) for a in B.x), tuple(f(a) for a in B.t))
         inp = self._input_jet(xi, tau, kx, kt)
         out = mlp_jet(list(self.weights), list(self.biases), inp, fused=fused).squeeze(-1)
         env = self._envelope(xi, tau, kx, kt)
@@ -191,18 +220,59 @@ class PINN(nn.Module):
         if env is not None:
             e = lambda c: None if c is None else c.unsqueeze(-1)  # noqa: E731
             B = product_jet(Jet(e(env.value), tuple(e(c) for c in env.x), tuple(e(c) for c in env.t)), B)
+        if self.oscillator is not None:
+            B = self._modulate(B, tau, kx, kt)
+        if self.enrichment is not None:
+            E = self.enrichment.jet(xi, tau, kx, kt)
+            cat = lambda a, e: torch.cat([a, e.to(a.dtype).expand(*a.shape[:-1], 1)], dim=-1)  # noqa: E731
+            B = Jet(cat(B.value, E.value), tuple(cat(a, e) for a, e in zip(B.x, E.x, strict=True)),
+                    tuple(cat(a, e) for a, e in zip(B.t, E.t, strict=True)))
         return B
+
+    def _modulate(self, B: Jet, tau: Tensor, kx: int, kt: int) -> Jet:
+        """[B, B sin(W tau), B cos(W tau)] along the feature axis (see the module docstring)."""
+        W = (self.oscillator * torch.exp(0.5 * self.log_ei.detach())).view(-1, 1, 1).to(tau.dtype)  # (M, 1, 1)
+        a = W * tau.unsqueeze(-1)
+        sn, cs = torch.sin(a), torch.cos(a)
+        mods = []
+        for v, d1, d2 in ((sn, W * cs, -W * W * sn), (cs, -W * sn, -W * W * cs)):
+            mods.append(product_jet(B, Jet(v, (None,) * kx, (d1, d2)[:kt])))
+        cat = lambda parts: None if all(p is None for p in parts) else torch.cat(  # noqa: E731
+            [torch.zeros_like(B.value) if p is None else p.expand_as(B.value) for p in parts], dim=-1)
+        return Jet(
+            torch.cat([B.value, mods[0].value, mods[1].value], dim=-1),
+            tuple(cat([B.x[k], mods[0].x[k], mods[1].x[k]]) for k in range(kx)),
+            tuple(cat([B.t[k], mods[0].t[k], mods[1].t[k]]) for k in range(kt)),
+        )
 
     @property
     def head(self) -> Tensor:
-        """The output layer as one coefficient matrix c (M, width + 1): weights, then bias."""
-        return torch.cat([self.weights[-1][..., 0], self.biases[-1][..., 0]], dim=-1)
+        """The output layer as one coefficient matrix c (M, D): weights, then bias (D = width + 1),
+        then with ``oscillator`` the sin- and cos-modulated coefficients (2 (width + 1) more), then with
+        ``enrichment`` the coefficient of the static enrichment (1 more)."""
+        return torch.cat([self.weights[-1][..., 0], self.biases[-1][..., 0], self.osc_head, self.enr_head], dim=-1)
 
     @torch.no_grad()
     def set_head(self, c: Tensor) -> None:
-        """Overwrite the output layer with coefficients c (M, width + 1)."""
-        self.weights[-1].copy_(c[:, :-1].unsqueeze(-1))
-        self.biases[-1].copy_(c[:, -1:].unsqueeze(-1))
+        """Overwrite the output layer with coefficients c (M, D) (see `head`)."""
+        w = self.width
+        self.weights[-1].copy_(c[:, :w].unsqueeze(-1))
+        self.biases[-1].copy_(c[:, w : w + 1].unsqueeze(-1))
+        n_osc = self.osc_head.shape[1]
+        self.osc_head.copy_(c[:, w + 1 : w + 1 + n_osc])
+        self.enr_head.copy_(c[:, w + 1 + n_osc :])
+
+    def head_parameters(self) -> list[nn.Parameter]:
+        """The parameters of the output layer (what `varpro` solves for instead of training)."""
+        return [self.weights[-1], self.biases[-1], self.osc_head, self.enr_head]
+
+    def member(self, m: int) -> PINN:
+        """A single-member copy of member m (same weights, dtype and options)."""
+        one = PINN(self.width, self.depth, members=1, hard_bc=self.hard_bc, hard_ic=self.hard_ic,
+                   time_frequency=self.time_frequency, oscillator=self.oscillator, enrichment=self.enrichment,
+                   dtype=self.log_ei.dtype)
+        one.load_state_dict({k: v[m : m + 1].detach().clone() for k, v in self.state_dict().items()})
+        return one.to(self.log_ei.device)
 
     def forward(self, xi: Tensor, tau: Tensor) -> Tensor:
         """w (M, N) at non-dimensional points xi, tau (M, N)."""

@@ -19,6 +19,7 @@ import torch
 
 from ..config import Beam, Config, Vehicle
 from ..data.measurements import Measurements
+from .enrich import StaticEnrichment
 
 #: default Gaussian delta width as a fraction of the span (beta = 0.025 L)
 DEFAULT_BETA_REL = 0.025
@@ -138,6 +139,16 @@ class Problem:
     def beta_for(self, beta_rel: float = DEFAULT_BETA_REL) -> float:
         """The Gaussian width [m]: `beta` if set, else beta_rel L."""
         return float(self.beta) if self.beta is not None else beta_rel * self.beam.length
+
+    def enrichment(self, beta_rel: float = DEFAULT_BETA_REL) -> StaticEnrichment:
+        """The axles as the non-dimensional static enrichment of the output layer (see `enrich`)."""
+        sc = self.scales
+        return StaticEnrichment(
+            loads=tuple(float(p) for p in self.vehicle.loads / sc.P),
+            delays=tuple(float(d) for d in self.vehicle.delays / sc.T),
+            speed=float(self.vehicle.speed * sc.T / sc.L),
+            beta_rel=float(self.beta_for(beta_rel) / sc.L),
+        )
 
     def tensors(
         self, members: int, device: str | torch.device = "cpu", dtype=torch.float32, beta_rel: float = DEFAULT_BETA_REL

@@ -39,6 +39,8 @@ log = logging.getLogger(__name__)
 CHECKPOINT_SCHEMA = "bayespinn.pinn.checkpoint/1"
 #: varpro: the golden-section bracket for log EI around its current value, per step
 VARPRO_HALF_WIDTH = 0.25
+#: varpro: the final head and EI solve uses this many times the training's collocation points
+FINAL_POINTS = 4
 
 
 def _contract(j: Jet, c: torch.Tensor) -> Jet:
@@ -101,8 +103,10 @@ class FitResult:
 
 def _build_model(problem: Problem, s: TrainSettings, members: int, generators=None) -> PINN:
     tf = problem.scales.time_frequency if s.time_features else None
+    osc = problem.scales.time_frequency if s.oscillator else None
+    enr = problem.enrichment(s.beta_rel) if s.enrich else None
     return PINN(s.width, s.depth, members=members, generators=generators, hard_bc=s.hard_bc, hard_ic=s.hard_ic,
-                time_frequency=tf, dtype=_dtype(s.dtype))
+                time_frequency=tf, oscillator=osc, enrichment=enr, dtype=_dtype(s.dtype))
 
 
 def _dtype(name: str) -> torch.dtype:
@@ -149,12 +153,12 @@ class _Trainer:
             raise ValueError("optimizer 'varpro' needs a Taylor engine")
         self.compiled = _want_compile(s, device)
         self._set_engine(s.engine)
-        head = {id(self.model.weights[-1]), id(self.model.biases[-1]), id(self.model.log_ei)}
+        head_params = self.model.head_parameters()
+        head = {id(p) for p in head_params} | {id(self.model.log_ei)}
         self.hidden = [p for p in self.model.parameters() if id(p) not in head]
         if self.varpro:
             groups = [{"params": self.hidden}]
         else:
-            head_params = [self.model.weights[-1], self.model.biases[-1]]
             groups = [{"params": self.hidden + head_params},
                       {"params": [self.model.log_ei], "lr_factor": s.lr_ei_factor}]
         self.adam = torch.optim.Adam(groups, lr=s.lr)
@@ -191,10 +195,11 @@ class _Trainer:
             return self._fn(col)
 
     # ------------------------------------------------------------------ pieces
-    def sample(self) -> Collocation:
+    def sample(self, factor: int = 1) -> Collocation:
+        """Fresh collocation points from the members' generators (``factor`` times the usual counts)."""
         s, pt = self.s, self.pt
         col = sample_collocation(
-            self.col_gens, s.n_pde, s.n_bc, s.n_ic, load_fraction=s.load_fraction,
+            self.col_gens, factor * s.n_pde, factor * s.n_bc, factor * s.n_ic, load_fraction=s.load_fraction,
             speed=pt.speed, delays=pt.delays, beta=float(pt.beta),
         )
         return col.to(self.device, self.dtype)
@@ -438,11 +443,16 @@ def fit(
                 callback(tr.step, {"phase": "lbfgs", "EI_raw": tr.EI_raw(), "model": tr.model})
     finally:
         bar.close()
-    # final losses on the last point set, at the final Gaussian width
+    # final losses at the final Gaussian width; varpro re-solves the head and EI for the final hidden layers
+    # on a fresh point set FINAL_POINTS times the usual size, so that the estimate does not hinge on the
+    # last (smaller) set the optimiser saw
     tr.set_beta(1.0)
-    if tr.col is None:
-        tr.col = tr.sample()
-    total, per, terms = tr.loss(tr.col)  # varpro: re-solves the head for the final hidden layers
+    if tr.col is None or (tr.varpro and s.epochs > 0):
+        tr.col = tr.sample(FINAL_POINTS if tr.varpro else 1)
+        if tr.compiled:  # a compiled loss is specialised to the point counts
+            tr.compiled = False
+            tr._set_engine(s.engine)
+    total, per, terms = tr.loss(tr.col)
     tr.guard(total.detach(), "final")
     losses = {k: terms[k].detach().cpu().double().numpy() for k in terms}
     losses["total"] = per.detach().cpu().double().numpy()

@@ -40,7 +40,7 @@ log = logging.getLogger(__name__)
 #: the members' mean Laplace variance counts as this many degrees of freedom in the pooled variance
 LAPLACE_DOF = 4
 #: share of the profile's Adam steps spent in the randomise-then-optimise phase
-RTO_FRACTION = 0.4
+RTO_FRACTION = 0.25
 #: posterior draws stored
 N_DRAWS = 4000
 #: members scattering more than this many times their own Laplace sd are flagged as not converged

@@ -2,11 +2,13 @@
 integrated out analytically.
 
 With the hidden layers of a trained PINN frozen, the non-dimensional deflection is linear in the
-output weights beta = (a, b): w = Phi a + b. Every term of the PINN is then linear in beta given
-theta = EI / EI_ref:
+output weights beta: w = Phi beta, Phi the output layer's basis (`PINN.basis_jet`: the last hidden
+features and a constant, plus the modulated features and the static enrichment where the profile has
+them; the modulation frequency stays at the fitted EI). Every term of the PINN is then linear in beta
+given theta = EI / EI_ref:
 
-* data (SI): y ~ N(D beta, sigma^2 I), D = U (a_u [Phi, 1] + a_xx / L^2 [Phi_xixi, 0]);
-* PDE pseudo-observations: 0 ~ N(theta S [Phi_xixixixi, 0] beta + I_c [Phi_tautau, 0] beta - f/q, s_f^2);
+* data (SI): y ~ N(D beta, sigma^2 I), D = U (a_u Phi + a_xx / L^2 Phi_xixi);
+* PDE pseudo-observations: 0 ~ N(theta S Phi_xixixixi beta + I_c Phi_tautau beta - f/q, s_f^2);
 * boundary and initial pseudo-observations: 0 ~ N(B beta, s_b^2), 0 ~ N(C beta, s_i^2);
 * prior beta ~ N(0, s_w^2 I).
 
@@ -32,7 +34,7 @@ from ..data.measurements import Measurements
 from ..pinn.losses import moving_load
 from ..pinn.network import PINN
 from ..pinn.problem import Problem
-from ..pinn.taylor import Jet, mlp_jet
+from ..pinn.taylor import Jet
 
 #: floor of the pseudo-observation sds (non-dimensional), so a perfect fit cannot make them singular
 MIN_PSEUDO_SD = 1e-6
@@ -41,23 +43,17 @@ WEIGHT_PRIOR_FACTOR = 10.0
 
 
 def feature_jet(model: PINN, member: int, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int) -> Jet:
-    """Jet of the last hidden layer's activations (N, H) of one member at points (N,)."""
-    if model.hard_bc or model.hard_ic:
-        raise NotImplementedError("last-layer marginalisation needs the PINN without hard constraints")
-    W = [w[member : member + 1].detach().double() for w in model.weights]
-    B = [b[member : member + 1].detach().double() for b in model.biases]
-    H = W[-1].shape[1]
-    eye = torch.eye(H, dtype=torch.float64).unsqueeze(0)
-    zero = torch.zeros(1, 1, H, dtype=torch.float64)
-    inp = model._input_jet(xi.double().unsqueeze(0), tau.double().unsqueeze(0), kx, kt)
+    """Jet of the output layer's basis functions (N, D) of one member at points (N,), float64.
+
+    The basis is `PINN.basis_jet`: the last hidden layer's activations, the constant (the output bias),
+    and with the fast profile's options the modulated features and the static enrichment.
+    """
+    net = model if (model.members == 1 and member == 0 and model.log_ei.dtype == torch.float64) else (
+        model.member(member).double())
     with torch.no_grad():
-        j = mlp_jet(W[:-1] + [eye], B[:-1] + [zero], inp, fused=False)
+        j = net.basis_jet(xi.double().unsqueeze(0), tau.double().unsqueeze(0), kx, kt)
     return Jet(j.value[0], tuple(c[0] if c is not None else None for c in j.x),
                tuple(c[0] if c is not None else None for c in j.t))
-
-
-def _aug(phi: torch.Tensor, const: float) -> torch.Tensor:
-    return torch.cat([phi, torch.full((phi.shape[0], 1), const, dtype=phi.dtype)], dim=1)
 
 
 class LastLayer:
@@ -84,6 +80,8 @@ class LastLayer:
         beta_rel: float | None = None,
         images: bool = False,
     ):
+        model = model.member(member).double()  # one member, float64, for every basis evaluation
+        member = 0
         self.model, self.member, self.problem = model, member, problem
         sc = problem.scales
         self.sc = sc
@@ -95,26 +93,26 @@ class LastLayer:
         a_u, a_xx = data.weights
         xi_d, tau_d = T(data.x / sc.L), T(data.t / sc.T)
         j = feature_jet(model, member, xi_d, tau_d, 2, 0)
-        D = sc.U * (T(a_u)[:, None] * _aug(j.value, 1.0) + (T(a_xx) / sc.L**2)[:, None] * _aug(j.dx(2), 0.0))
+        D = sc.U * (T(a_u)[:, None] * j.value + (T(a_xx) / sc.L**2)[:, None] * j.dx(2))
         y = T(data.value)
         # PDE pseudo-observations (non-dimensional residual, as in training but unscaled by beta)
         xi_f, tau_f = T(rng.uniform(0, 1, n_pde)), T(rng.uniform(0, 1, n_pde))
         jf = feature_jet(model, member, xi_f, tau_f, 4, 2)
-        P4 = pt.stiffness * _aug(jf.dx(4), 0.0)
-        P2 = pt.inertia * _aug(jf.dt(2), 0.0)
+        P4 = pt.stiffness * jf.dx(4)
+        P2 = pt.inertia * jf.dt(2)
         f = moving_load(xi_f.unsqueeze(0), tau_f.unsqueeze(0), pt, images)[0]
         # boundary (u = u_xx = 0 at both ends) and initial (u = u_t = 0) pseudo-observations
         tb = T(rng.uniform(0, 1, n_bc))
         rows_b = []
         for end in (0.0, 1.0):
             jb = feature_jet(model, member, torch.full_like(tb, end), tb, 2, 0)
-            rows_b += [_aug(jb.value, 1.0), _aug(jb.dx(2), 0.0)]
+            rows_b += [jb.value, jb.dx(2)]
         Bm = torch.cat(rows_b)
         xi_i = T(rng.uniform(0, 1, n_ic))
         ji = feature_jet(model, member, xi_i, torch.zeros_like(xi_i), 0, 1)
-        Cm = torch.cat([_aug(ji.value, 1.0), _aug(ji.dt(1), 0.0)])
+        Cm = torch.cat([ji.value, ji.dt(1)])
         # the fitted output weights, and the residual scales they achieve
-        beta_fit = torch.cat([model.weights[-1][member, :, 0].detach().double(), model.biases[-1][member, 0].detach().double()])
+        beta_fit = model.head[0].detach().double()
         self.theta_fit = float(torch.exp(model.log_ei[member].detach().double()))
         r_f = self.theta_fit * P4 @ beta_fit + P2 @ beta_fit - f
         self.s_f = max(float(r_f.pow(2).mean().sqrt()), MIN_PSEUDO_SD)
@@ -173,7 +171,7 @@ class LastLayer:
         sc = self.sc
         T = lambda a: torch.as_tensor(np.asarray(a, float).ravel(), dtype=torch.float64)  # noqa: E731
         j = feature_jet(self.model, self.member, T(x) / sc.L, T(t) / sc.T, kx, 0)
-        Phi = _aug(j.value, 1.0) if kx == 0 else _aug(j.dx(kx), 0.0)
+        Phi = j.dx(kx)
         scale = sc.U / sc.L**kx
         out = np.empty((len(draws_log_theta), Phi.shape[0]))
         for i, (lt, ls) in enumerate(zip(draws_log_theta, draws_log_sigma, strict=True)):
