@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from bayespinn.pinn.enrich import StaticEnrichment
+from bayespinn.pinn.enrich import FreeVibration, StaticEnrichment
 from bayespinn.pinn.network import PINN
 
 #: float32 agreement: both engines round differently through 5 layers; observed ~5e-7, 1e-4 is the brief's bar
@@ -18,7 +18,8 @@ CASES = [
     dict(hard_bc=True, time_frequency=40.0),
     dict(oscillator=40.0),
     dict(hard_bc=True, hard_ic=True, oscillator=25.0),
-    dict(oscillator=40.0, enrichment=StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05)),
+    dict(oscillator=40.0, extras=(StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05),)),
+    dict(extras=(StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05), FreeVibration((0.0, 0.3, 0.7), 2, 30.0, 0.02))),
 ]
 
 
@@ -29,7 +30,7 @@ def _net(dtype, members=2, **kw):
         net.log_ei.copy_(torch.linspace(-0.1, 0.2, members))
         # the modulated coefficients start at zero: make them count, or the check would be empty
         net.osc_head.copy_(torch.randn(net.osc_head.shape, generator=gens[0], dtype=torch.float64).to(dtype))
-        net.enr_head.copy_(torch.randn(net.enr_head.shape, generator=gens[0], dtype=torch.float64).to(dtype))
+        net.extra_head.copy_(torch.randn(net.extra_head.shape, generator=gens[0], dtype=torch.float64).to(dtype))
     return net
 
 
@@ -134,3 +135,19 @@ def test_static_enrichment_solves_the_gaussian_load():
     for end in (0.0, 1.0):
         jb = enr.jet(torch.full_like(tau, end), tau, 2, 0)
         assert float(jb.value.abs().max()) < 1e-12 and float(jb.dx(2).abs().max()) < 1e-10
+
+
+def test_free_vibrations_solve_the_homogeneous_equation():
+    """Each free-vibration feature solves theta / 48 w_xixixixi + c w_tautau = 0 after its event (undamped),
+    with c = theta pi^4 / (48 W_1^2 exp(s)) fixed by the dispersion relation, and vanishes at the supports."""
+    fv = FreeVibration((0.0, 0.4), 2, 30.0, 0.0)
+    g = torch.Generator().manual_seed(6)
+    xi, tau = torch.rand(1, 400, generator=g, dtype=torch.float64), torch.rand(1, 400, generator=g, dtype=torch.float64)
+    s = torch.tensor([0.1], dtype=torch.float64)
+    j = fv.jet(xi, tau, 4, 2, s)
+    theta = float(torch.exp(s))
+    c = theta * torch.pi**4 / (48 * 30.0**2 * theta)
+    r = theta / 48 * j.dx(4) + c * j.dt(2)
+    assert float(r.abs().max()) < 1e-9 * float(j.dx(4).abs().max())
+    jb = fv.jet(torch.ones_like(tau), tau, 2, 0, s)
+    assert float(jb.value.abs().max()) < 1e-12 and float(jb.dx(2).abs().max()) < 1e-9

@@ -50,8 +50,10 @@ class StaticEnrichment:
     speed: float
     beta_rel: float
 
-    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet:
-        """Jet of E at points (M, N): components (M, N, 1)."""
+    n_features = 1
+
+    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor | None = None) -> Jet:
+        """Jet of E at points (M, N): components (M, N, 1) (``log_ei`` is not used)."""
         n = n_terms(self.beta_rel)
         k = math.pi * torch.arange(1, n + 1, dtype=xi.dtype, device=xi.device)  # (n,)
         g = 2.0 * torch.exp(-((k * self.beta_rel) ** 2) / 4.0) / k**4 * 48.0
@@ -74,3 +76,67 @@ class StaticEnrichment:
             return ((g * k**mx) * x_parts[mx % 4] * A[mt]).sum(-1, keepdim=True)
 
         return Jet(comp(0, 0), tuple(comp(m, 0) for m in range(1, kx + 1)), tuple(comp(0, m) for m in range(1, kt + 1)))
+
+
+@dataclass(frozen=True)
+class FreeVibration:
+    """Free vibrations of the first modes, started at every axle entry and exit, as basis functions.
+
+    A girder crossed in 2.4 s vibrates freely at its first natural frequency (about 24 cycles per crossing
+    of the Exeter girder, 2 % of the deflection). Between two axle events (an axle entering or leaving
+    the span) the free part of the response is a fixed combination of the beam's free vibrations, so the
+    output layer gets, for modes n = 1..K and events tau_e,
+
+        sin(n pi xi) H(tau - tau_e) exp(-zeta W_n s) {sin, cos}(W_n sqrt(1 - zeta^2) s),  s = tau - tau_e,
+
+    W_n = n^2 W_1 sqrt(EI / EI_ref), W_1 = omega_1(EI_ref) T. Each is an exact solution of the homogeneous
+    beam equation with the simply supported boundary conditions at the current EI, so they add the dynamics
+    with 2 K (events) coefficients and no freedom to bend the static solution. (The modulated features of
+    `network` also represent the vibration, with far more freedom: under noise they absorb noise and bias
+    EI.) EI enters detached, like the modulated features: the frequency follows EI between steps.
+
+    events : entry and exit times / T inside [0, 1); modes : K; frequency : W_1 [rad]; damping : zeta.
+    """
+
+    events: tuple[float, ...]
+    modes: int
+    frequency: float
+    damping: float = 0.0
+
+    @property
+    def n_features(self) -> int:
+        return 2 * self.modes * len(self.events)
+
+    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor) -> Jet:
+        """Jet of the features at points (M, N): components (M, N, n_features)."""
+        n = torch.arange(1, self.modes + 1, dtype=xi.dtype, device=xi.device)  # (K,)
+        k = math.pi * n
+        kxi = xi.unsqueeze(-1) * k  # (M, N, K)
+        sx, cx = torch.sin(kxi), torch.cos(kxi)
+        x_parts = [sx, cx, -sx, -cx]
+        W = (self.frequency * torch.exp(0.5 * log_ei.detach().to(xi.dtype))).view(-1, 1, 1) * n**2  # (M, 1, K)
+        z = self.damping
+        a, w = z * W, W * math.sqrt(1.0 - z * z)
+        vals, d1s, d2s = [], [], []
+        for te in self.events:
+            s = (tau - te).unsqueeze(-1)  # (M, N, 1)
+            on = (s >= 0.0).to(xi.dtype)
+            sp = s.clamp_min(0.0)
+            e = torch.exp(-a * sp) * on
+            sn, cs = torch.sin(w * sp), torch.cos(w * sp)
+            # f = e sin: f' = e (-a sin + w cos), f'' = e ((a^2 - w^2) sin - 2 a w cos); likewise for cos
+            for f0, f1, f2 in (
+                (sn, -a * sn + w * cs, (a * a - w * w) * sn - 2 * a * w * cs),
+                (cs, -a * cs - w * sn, (a * a - w * w) * cs + 2 * a * w * sn),
+            ):
+                vals.append(e * f0)
+                d1s.append(e * f1)
+                d2s.append(e * f2)
+        T0, T1, T2 = (torch.cat(v, dim=-1) for v in (vals, d1s, d2s))  # (M, N, 2 K E), per event: sin K, cos K
+        reps = 2 * len(self.events)
+
+        def xfac(m: int) -> Tensor:
+            return (k**m * x_parts[m % 4]).repeat(1, 1, reps)
+
+        X0 = xfac(0)
+        return Jet(X0 * T0, tuple(xfac(m) * T0 for m in range(1, kx + 1)), tuple(X0 * Tt for Tt in (T1, T2)[:kt]))

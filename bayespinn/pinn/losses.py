@@ -70,9 +70,10 @@ def data_order(pt: ProblemTensors) -> int:
     return 2 if pt.needs_curvature else 0
 
 
-def pde_scale(pt: ProblemTensors) -> float:
-    """sqrt(pi) beta / L: the residual is divided by the peak intensity of a Gaussian load of P."""
-    return pt.beta * math.sqrt(math.pi)
+def pde_scale(pt: ProblemTensors) -> float | Tensor:
+    """The factor the residual (in units of q = P / L) is multiplied by: sqrt(pi) beta / L with
+    ``pde_norm='peak'`` (divided by the peak intensity of a Gaussian load of P), 1 with 'load'."""
+    return pt.beta * math.sqrt(math.pi) if pt.pde_norm == "peak" else 1.0
 
 
 def pde_residual_from_jet(j: Jet, ei_ratio: Tensor, xi: Tensor, tau: Tensor, pt: ProblemTensors,

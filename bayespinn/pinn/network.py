@@ -37,7 +37,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-from .enrich import StaticEnrichment
+from .enrich import FreeVibration, StaticEnrichment
 from .taylor import Jet, autograd_jet, hidden_stack, mlp_jet, product_jet, unstack
 
 #: time constant of the hard initial-condition factor g(tau) = 1 - exp(-(tau/c)^2) (non-dimensional)
@@ -60,8 +60,9 @@ class PINN(nn.Module):
         at the first natural frequency for the current EI (see `_input_jet`)
     oscillator : None, or omega_1(EI_ref) T [rad]: the modulated output (module docstring), with
         W = oscillator sqrt(EI / EI_ref)
-    enrichment : None, or the axles as a `enrich.StaticEnrichment`: one more output basis function, the
-        quasi-static deflection of the Gaussian loads, with its own coefficient (see `enrich`)
+    extras : fixed basis functions appended to the output layer's, each with its own coefficients (see
+        `enrich`): `StaticEnrichment` (the quasi-static deflection of the Gaussian loads) and
+        `FreeVibration` (free vibrations of the first modes started at each axle event)
     dtype : torch dtype of the parameters
     """
 
@@ -77,7 +78,7 @@ class PINN(nn.Module):
         hard_ic: bool = False,
         time_frequency: float | None = None,
         oscillator: float | None = None,
-        enrichment: StaticEnrichment | None = None,
+        extras: Sequence[StaticEnrichment | FreeVibration] = (),
         dtype: torch.dtype = torch.float32,
     ):
         super().__init__()
@@ -107,8 +108,9 @@ class PINN(nn.Module):
         # coefficients of the sin- and cos-modulated features (weights then bias of each), start at zero
         n_osc = 0 if self.oscillator is None else 2 * (width + 1)
         self.osc_head = nn.Parameter(torch.zeros(members, n_osc, dtype=dtype))
-        self.enrichment = enrichment
-        self.enr_head = nn.Parameter(torch.zeros(members, 0 if enrichment is None else 1, dtype=dtype))
+        self.extras = tuple(extras)
+        n_extra = sum(e.n_features for e in self.extras)
+        self.extra_head = nn.Parameter(torch.zeros(members, n_extra, dtype=dtype))
 
     # ------------------------------------------------------------------ inputs and outputs
     def _input_jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet:
@@ -189,7 +191,7 @@ class PINN(nn.Module):
         if engine not in ENGINES:
             raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
         fused = engine == "taylor"
-        if self.oscillator is not None or self.enrichment is not None:
+        if self.oscillator is not None or self.extras:
             B = self.basis_jet(xi, tau, kx, kt, engine=engine)
             c = self.head
             f = lambda a: None if a is None else torch.bmm(a, c.unsqueeze(-1))[..., 0]  # noqa: E731
@@ -222,9 +224,9 @@ class PINN(nn.Module):
             B = product_jet(Jet(e(env.value), tuple(e(c) for c in env.x), tuple(e(c) for c in env.t)), B)
         if self.oscillator is not None:
             B = self._modulate(B, tau, kx, kt)
-        if self.enrichment is not None:
-            E = self.enrichment.jet(xi, tau, kx, kt)
-            cat = lambda a, e: torch.cat([a, e.to(a.dtype).expand(*a.shape[:-1], 1)], dim=-1)  # noqa: E731
+        for extra in self.extras:
+            E = extra.jet(xi, tau, kx, kt, self.log_ei)
+            cat = lambda a, e: torch.cat([a, e.to(a.dtype).expand(*a.shape[:-1], e.shape[-1])], dim=-1)  # noqa: E731
             B = Jet(cat(B.value, E.value), tuple(cat(a, e) for a, e in zip(B.x, E.x, strict=True)),
                     tuple(cat(a, e) for a, e in zip(B.t, E.t, strict=True)))
         return B
@@ -248,9 +250,9 @@ class PINN(nn.Module):
     @property
     def head(self) -> Tensor:
         """The output layer as one coefficient matrix c (M, D): weights, then bias (D = width + 1),
-        then with ``oscillator`` the sin- and cos-modulated coefficients (2 (width + 1) more), then with
-        ``enrichment`` the coefficient of the static enrichment (1 more)."""
-        return torch.cat([self.weights[-1][..., 0], self.biases[-1][..., 0], self.osc_head, self.enr_head], dim=-1)
+        then with ``oscillator`` the sin- and cos-modulated coefficients (2 (width + 1) more), then the
+        coefficients of the ``extras``."""
+        return torch.cat([self.weights[-1][..., 0], self.biases[-1][..., 0], self.osc_head, self.extra_head], dim=-1)
 
     @torch.no_grad()
     def set_head(self, c: Tensor) -> None:
@@ -260,16 +262,16 @@ class PINN(nn.Module):
         self.biases[-1].copy_(c[:, w : w + 1].unsqueeze(-1))
         n_osc = self.osc_head.shape[1]
         self.osc_head.copy_(c[:, w + 1 : w + 1 + n_osc])
-        self.enr_head.copy_(c[:, w + 1 + n_osc :])
+        self.extra_head.copy_(c[:, w + 1 + n_osc :])
 
     def head_parameters(self) -> list[nn.Parameter]:
         """The parameters of the output layer (what `varpro` solves for instead of training)."""
-        return [self.weights[-1], self.biases[-1], self.osc_head, self.enr_head]
+        return [self.weights[-1], self.biases[-1], self.osc_head, self.extra_head]
 
     def member(self, m: int) -> PINN:
         """A single-member copy of member m (same weights, dtype and options)."""
         one = PINN(self.width, self.depth, members=1, hard_bc=self.hard_bc, hard_ic=self.hard_ic,
-                   time_frequency=self.time_frequency, oscillator=self.oscillator, enrichment=self.enrichment,
+                   time_frequency=self.time_frequency, oscillator=self.oscillator, extras=self.extras,
                    dtype=self.log_ei.dtype)
         one.load_state_dict({k: v[m : m + 1].detach().clone() for k, v in self.state_dict().items()})
         return one.to(self.log_ei.device)

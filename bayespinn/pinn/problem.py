@@ -19,7 +19,7 @@ import torch
 
 from ..config import Beam, Config, Vehicle
 from ..data.measurements import Measurements
-from .enrich import StaticEnrichment
+from .enrich import FreeVibration, StaticEnrichment
 
 #: default Gaussian delta width as a fraction of the span (beta = 0.025 L)
 DEFAULT_BETA_REL = 0.025
@@ -150,8 +150,18 @@ class Problem:
             beta_rel=float(self.beta_for(beta_rel) / sc.L),
         )
 
+    def free_vibration(self, modes: int) -> FreeVibration:
+        """Free vibrations of the first `modes` modes from each axle entry and exit inside [0, T) (`enrich`)."""
+        sc = self.scales
+        d = self.vehicle.delays
+        times = np.concatenate([d, d + self.beam.length / self.vehicle.speed]) / sc.T
+        events = tuple(sorted({round(float(e), 12) for e in times if 0.0 <= e < 1.0}))
+        return FreeVibration(events=events, modes=int(modes), frequency=sc.time_frequency,
+                             damping=float(self.beam.damping_ratio))
+
     def tensors(
-        self, members: int, device: str | torch.device = "cpu", dtype=torch.float32, beta_rel: float = DEFAULT_BETA_REL
+        self, members: int, device: str | torch.device = "cpu", dtype=torch.float32, beta_rel: float = DEFAULT_BETA_REL,
+        pde_norm: str = "peak",
     ) -> ProblemTensors:
         """Non-dimensional torch tensors for M members (data broadcast when shared)."""
         sc = self.scales
@@ -190,6 +200,7 @@ class Problem:
             beta=torch.tensor(self.beta_for(beta_rel) / sc.L, dtype=dtype, device=device),
             stiffness=sc.stiffness,
             inertia=sc.inertia,
+            pde_norm=pde_norm,
         )
 
 
@@ -202,7 +213,8 @@ class ProblemTensors:
     0.5 sum_i (s_i / sigma)^2 that turns the mean squared scaled residual into the Gaussian negative log
     likelihood; anchor : None or ((M,) loc of log(EI/EI_ref), sd); loads (J,) axle loads / P;
     delays (J,) entry times / T; speed v T / L; beta / L (a 0-d tensor, so a
-    training schedule can change it in place without recompiling); stiffness = 1/48 and inertia coefficients.
+    training schedule can change it in place without recompiling); stiffness = 1/48 and inertia coefficients;
+    pde_norm : 'peak' (PDE residual divided by the peak Gaussian intensity) or 'load' (by q = P / L).
     """
 
     xi: torch.Tensor
@@ -220,3 +232,4 @@ class ProblemTensors:
     beta: torch.Tensor
     stiffness: float
     inertia: float
+    pde_norm: str = "peak"

@@ -3,10 +3,10 @@
 * ``smoke``: a few seconds, for tests (small network, few points, few steps); not accurate.
 * ``fast``: the default, minutes on a 2-core CPU. The paper's network (5 x 64 tanh) and loss terms
   (Eq. 10-15, 23), trained differently: variable projection (the output layer and EI solved by least
-  squares at every step, `varpro`), an output layer that also modulates its features at the first natural
-  frequency (`network`, ``oscillator``) and carries the static deflection of the Gaussian loads as one
-  more basis function (`enrich`), Gaussian width beta = 0.01 L, 1200 Adam steps on a cosine schedule
-  with resampled points.
+  squares at every step, `varpro`); an output layer that also carries the exact quasi-static deflection
+  of the Gaussian loads and the free vibrations of the first three modes started at each axle event
+  (`enrich`), each with its own free coefficient; the PDE residual in units of P / L (not of the
+  Gaussian's peak); beta = 0.01 L; 1200 Adam steps on a cosine schedule with resampled points.
 * ``paper``: the paper's Table 1: 5 x 64 tanh, 2500 PDE / 2000 BC / 1000 IC points, Adam for 60 000
   epochs with the quadratic schedule phi_i = (1 - (i/N)^2) phi_0 + (i/N)^2 phi_1, phi_0 = 1e-2,
   phi_1 = 0.7 phi_0, adaptive loss weights, no L-BFGS, no resampling (meant for a GPU).
@@ -43,6 +43,8 @@ class TrainSettings:
     lbfgs_chunk : L-BFGS iterations between checkpoints / divergence checks
     weighting : 'fixed' or 'adaptive' (paper Table 1: alpha_k = L_k / min L, detached)
     w_pde, w_ic, w_bc, w_data : fixed weights of the four terms
+    pde_norm : 'peak': the PDE residual is divided by the peak intensity of the Gaussian load (so it is
+        O(1) at the load, and smooth errors count (beta sqrt(pi) / L)^2 less); 'load': by q = P / L
     beta_rel : Gaussian delta width beta / L (used when the Problem does not set beta)
     beta_start, beta_anneal : continuation in the Gaussian width: beta starts at beta_start times its
         value and shrinks geometrically to it over the first beta_anneal share of the Adam steps (1.0: off)
@@ -59,6 +61,8 @@ class TrainSettings:
         vibration of mode 1 is representable; off in the paper profile
     enrich : static enrichment of the output layer: one more basis function, the quasi-static deflection
         of the Gaussian loads, with a free coefficient (`enrich`); off in the paper profile
+    free_modes : number of modes K whose free vibrations, started at every axle entry and exit, are output
+        basis functions (`enrich.FreeVibration`; 0: none; off in the paper profile)
     engine : 'taylor' (default), 'taylor-unfused' or 'autograd' (nested autograd, slow reference)
     compile : torch.compile the loss ('auto': on for CUDA, off for CPU; falls back to eager on failure)
     dtype : 'float32' (the paper's FP32) or 'float64'
@@ -88,6 +92,7 @@ class TrainSettings:
     w_ic: float = 1.0
     w_bc: float = 1.0
     w_data: float = 1.0
+    pde_norm: str = "load"
     beta_rel: float = 0.01
     beta_start: float = 1.0
     beta_anneal: float = 0.5
@@ -96,8 +101,9 @@ class TrainSettings:
     hard_bc: bool = False
     hard_ic: bool = False
     time_features: bool = False
-    oscillator: bool = True
+    oscillator: bool = False
     enrich: bool = True
+    free_modes: int = 3
     engine: str = "taylor"
     compile: str | bool = "auto"
     dtype: str = "float32"
@@ -111,7 +117,7 @@ class TrainSettings:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 1")
-        for name in ("epochs", "resample_every", "lbfgs_iters"):
+        for name in ("epochs", "resample_every", "lbfgs_iters", "free_modes"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 0")
@@ -137,6 +143,7 @@ class TrainSettings:
             "engine": ("taylor", "taylor-unfused", "autograd"),
             "dtype": ("float32", "float64"),
             "compile": ("auto", True, False),
+            "pde_norm": ("peak", "load"),
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
@@ -189,7 +196,7 @@ PROFILES: dict[str, TrainSettings] = {
     "paper": TrainSettings(
         profile="paper", optimizer="adam", width=64, depth=5, epochs=60_000, lr=1e-2, lr_final=0.7e-2, schedule="paper",
         n_pde=2500, n_bc=2000, n_ic=1000, load_fraction=0.0, resample_every=0, lbfgs_iters=0,
-        weighting="adaptive", images=False, time_features=False, oscillator=False, enrich=False, beta_rel=0.025,
+        weighting="adaptive", images=False, time_features=False, pde_norm="peak", oscillator=False, enrich=False, free_modes=0, beta_rel=0.025,
         checkpoint_every=2000, log_every=200,
     ),
 }

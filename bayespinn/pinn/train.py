@@ -104,9 +104,13 @@ class FitResult:
 def _build_model(problem: Problem, s: TrainSettings, members: int, generators=None) -> PINN:
     tf = problem.scales.time_frequency if s.time_features else None
     osc = problem.scales.time_frequency if s.oscillator else None
-    enr = problem.enrichment(s.beta_rel) if s.enrich else None
+    extras = []
+    if s.enrich:
+        extras.append(problem.enrichment(s.beta_rel))
+    if s.free_modes:
+        extras.append(problem.free_vibration(s.free_modes))
     return PINN(s.width, s.depth, members=members, generators=generators, hard_bc=s.hard_bc, hard_ic=s.hard_ic,
-                time_frequency=tf, oscillator=osc, enrichment=enr, dtype=_dtype(s.dtype))
+                time_frequency=tf, oscillator=osc, extras=extras, dtype=_dtype(s.dtype))
 
 
 def _dtype(name: str) -> torch.dtype:
@@ -147,7 +151,7 @@ class _Trainer:
         self.col_gens = [torch.Generator().manual_seed(b) for _, b in seeds]
         self.model = _build_model(problem, s, members, init_gens).to(device)
         self.beta = problem.beta_for(s.beta_rel)
-        self.pt = problem.tensors(members, device, self.dtype, beta_rel=s.beta_rel)
+        self.pt = problem.tensors(members, device, self.dtype, beta_rel=s.beta_rel, pde_norm=s.pde_norm)
         self.varpro = s.optimizer == "varpro"
         if self.varpro and s.engine == "autograd":
             raise ValueError("optimizer 'varpro' needs a Taylor engine")

@@ -14,7 +14,8 @@ width of log EI, from the exact last-layer marginal likelihood of its trained fe
 The ensemble's variance of log EI is the conjugate pooling of the two estimates of the same quantity:
 (nu0 s_laplace^2 + (M - 1) S_between^2) / (nu0 + M - 1), nu0 = `LAPLACE_DOF`, so the between-member
 spread (which also carries training noise) dominates as M grows. sigma gets a conjugate posterior per
-member, sigma^2 ~ InvGamma(n/2, RSS_m/2) on the member's residuals against the measured data, pooled.
+member, sigma^2 ~ InvGamma((n - p_m)/2, RSS_m/2) on the member's residuals against the measured data, pooled,
+p_m the effective number of output weights the fit spends on the data (`LastLayer.effective_params`).
 """
 
 from __future__ import annotations
@@ -100,6 +101,7 @@ def ensemble_posterior(
     model = r2.model("cpu")
     lap_sd = np.full(M, ei_prior.log_sd)
     rss = np.zeros(M)
+    dof = np.full(M, float(n))
     lls = []
     if n:
         pred2 = np.atleast_2d(_predict_data(r2, data))
@@ -109,7 +111,10 @@ def ensemble_posterior(
                 ll = LastLayer(model, m, base, data, np.random.default_rng(seeding.child(seed, "collocation", m)),
                                n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
                                beta_rel=settings.beta_rel, images=settings.images)
-                lap_sd[m] = ll.laplace_sd_log_theta(math.log(ll.theta_fit), 0.5 * math.log(rss[m] / n), ei_prior.log_sd)
+                ls = 0.5 * math.log(rss[m] / n)
+                lap_sd[m] = ll.laplace_sd_log_theta(math.log(ll.theta_fit), ls, ei_prior.log_sd)
+                # residual degrees of freedom: the output layer absorbs p_eff of the n measurements
+                dof[m] = max(n - ll.effective_params(math.log(ll.theta_fit), ls), 1.0)
             lls.append(ll)
     between = float(np.var(log_ei_m, ddof=1)) if M > 1 else 0.0
     lap_var = float(np.mean(lap_sd**2))
@@ -119,7 +124,7 @@ def ensemble_posterior(
     log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
     if n:
         pick = draw_rng.integers(0, M, N_DRAWS)
-        g = draw_rng.gamma(n / 2.0, 1.0, N_DRAWS)
+        g = draw_rng.gamma(dof[pick] / 2.0, 1.0)
         sigma = np.sqrt(rss[pick] / (2.0 * g))
     else:
         sigma = np.full(N_DRAWS, np.nan)
@@ -132,6 +137,7 @@ def ensemble_posterior(
         "laplace_sd_log_EI": math.sqrt(lap_var),
         "pooling": f"conjugate: Laplace variance with {LAPLACE_DOF} dof + between-member variance with {M - 1} dof",
         "sigma_hat_rto": sigma_hat,
+        "member_residual_dof": dof.tolist(),
         "identified": ident,
     }
     if M == 1:

@@ -157,6 +157,11 @@ class LastLayer:
             cov = torch.cholesky_inverse(Lc)
         return mean, cov
 
+    def effective_params(self, log_theta: float, log_sigma: float) -> float:
+        """Degrees of freedom the output weights spend on the data: trace(D A^-1 D') / sigma^2 [-]."""
+        _, cov = self.weights_posterior(log_theta, log_sigma)
+        return float(torch.trace(self.G_dd @ cov)) * math.exp(-2.0 * log_sigma)
+
     def laplace_sd_log_theta(self, log_theta: float, log_sigma: float, prior_sd: float) -> float:
         """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's."""
         lt = torch.tensor(log_theta, dtype=torch.float64, requires_grad=True)
