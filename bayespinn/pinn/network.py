@@ -38,7 +38,7 @@ import torch
 from torch import Tensor, nn
 
 from .enrich import FreeVibration, StaticEnrichment
-from .taylor import Jet, autograd_jet, hidden_stack, mlp_jet, product_jet, unstack
+from .taylor import Jet, autograd_jet, contract_jet, hidden_stack, mlp_jet, product_jet, unstack
 
 #: time constant of the hard initial-condition factor g(tau) = 1 - exp(-(tau/c)^2) (non-dimensional)
 HARD_IC_TAU = 0.05
@@ -192,10 +192,7 @@ class PINN(nn.Module):
             raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
         fused = engine == "taylor"
         if self.oscillator is not None or self.extras:
-            B = self.basis_jet(xi, tau, kx, kt, engine=engine)
-            c = self.head
-            f = lambda a: None if a is None else torch.bmm(a, c.unsqueeze(-1))[..., 0]  # noqa: E731
-            return Jet(f(B.value), tuple(f(a) for a in B.x), tuple(f(a) for a in B.t))
+            return contract_jet(self.basis_jet(xi, tau, kx, kt, engine=engine), self.head)
         inp = self._input_jet(xi, tau, kx, kt)
         out = mlp_jet(list(self.weights), list(self.biases), inp, fused=fused).squeeze(-1)
         env = self._envelope(xi, tau, kx, kt)

@@ -303,6 +303,12 @@ def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet, *, fu
     return linear_stack(H, kx, kt, weights[-1], biases[-1])
 
 
+def contract_jet(basis: Jet, c: Tensor) -> Jet:
+    """Jet of w = sum_d phi_d c_d from a basis jet (components (M, N, D)) and coefficients c (M, D)."""
+    f = lambda a: None if a is None else torch.bmm(a, c.unsqueeze(-1))[..., 0]  # noqa: E731
+    return Jet(f(basis.value), tuple(f(a) for a in basis.x), tuple(f(a) for a in basis.t))
+
+
 def product_jet(a: Jet, b: Jet) -> Jet:
     """Leibniz rule along each direction: the jet of a * b (orders of `a`)."""
     binom = ((1,), (1, 1), (1, 2, 1), (1, 3, 3, 1), (1, 4, 6, 4, 1))

@@ -31,7 +31,7 @@ from .network import PINN
 from .problem import Problem
 from .sampling import Collocation, sample_collocation
 from .settings import TrainSettings
-from .taylor import Jet
+from .taylor import contract_jet
 from .varpro import head_system, solve_head
 
 log = logging.getLogger(__name__)
@@ -41,12 +41,6 @@ CHECKPOINT_SCHEMA = "bayespinn.pinn.checkpoint/1"
 VARPRO_HALF_WIDTH = 0.25
 #: varpro: the final head and EI solve uses this many times the training's collocation points
 FINAL_POINTS = 4
-
-
-def _contract(j: Jet, c: torch.Tensor) -> Jet:
-    """Jet of w = sum_d phi_d c_d from a basis jet (M, N, D) and coefficients c (M, D)."""
-    f = lambda a: None if a is None else torch.bmm(a, c.unsqueeze(-1))[..., 0]  # noqa: E731
-    return Jet(f(j.value), tuple(f(a) for a in j.x), tuple(f(a) for a in j.t))
 
 
 @dataclass
@@ -236,7 +230,7 @@ class _Trainer:
             with torch.no_grad():
                 model.log_ei.copy_(sol.to(self.dtype))
         c = model.head.detach()
-        jets = {k: _contract(j, c) for k, j in basis.items()}
+        jets = {k: contract_jet(j, c) for k, j in basis.items()}
         terms = terms_from_jets(jets, model.EI_ratio.detach(), pt, col, self.objective.images)
         if pt.anchor is not None:
             terms["prior"] = prior_term(model.log_ei.detach(), pt)

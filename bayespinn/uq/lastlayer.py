@@ -174,7 +174,7 @@ class LastLayer:
     def predictive(self, x, t, kx: int, draws_log_theta, draws_log_sigma, rng: np.random.Generator) -> np.ndarray:
         """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)."""
         sc = self.sc
-        T = lambda a: torch.as_tensor(np.asarray(a, float).ravel(), dtype=torch.float64)  # noqa: E731
+        T = lambda a: torch.as_tensor(np.array(a, float).ravel(), dtype=torch.float64)  # noqa: E731
         j = feature_jet(self.model, self.member, T(x) / sc.L, T(t) / sc.T, kx, 0)
         Phi = j.dx(kx)
         scale = sc.U / sc.L**kx
