@@ -38,7 +38,16 @@ import torch
 from torch import Tensor, nn
 
 from .enrich import FreeVibration, StaticEnrichment
-from .taylor import Jet, autograd_jet, contract_jet, hidden_stack, mlp_jet, product_jet, unstack
+from .taylor import (
+    Jet,
+    autograd_jet,
+    cat_jets,
+    contract_jet,
+    hidden_stack,
+    mlp_jet,
+    product_jet,
+    unstack,
+)
 
 #: time constant of the hard initial-condition factor g(tau) = 1 - exp(-(tau/c)^2) (non-dimensional)
 HARD_IC_TAU = 0.05
@@ -221,11 +230,8 @@ class PINN(nn.Module):
             B = product_jet(Jet(e(env.value), tuple(e(c) for c in env.x), tuple(e(c) for c in env.t)), B)
         if self.oscillator is not None:
             B = self._modulate(B, tau, kx, kt)
-        for extra in self.extras:
-            E = extra.jet(xi, tau, kx, kt, self.log_ei)
-            cat = lambda a, e: torch.cat([a, e.to(a.dtype).expand(*a.shape[:-1], e.shape[-1])], dim=-1)  # noqa: E731
-            B = Jet(cat(B.value, E.value), tuple(cat(a, e) for a, e in zip(B.x, E.x, strict=True)),
-                    tuple(cat(a, e) for a, e in zip(B.t, E.t, strict=True)))
+        if self.extras:
+            B = cat_jets(B, *(e.jet(xi, tau, kx, kt, self.log_ei) for e in self.extras))
         return B
 
     def _modulate(self, B: Jet, tau: Tensor, kx: int, kt: int) -> Jet:
@@ -233,16 +239,9 @@ class PINN(nn.Module):
         W = (self.oscillator * torch.exp(0.5 * self.log_ei.detach())).view(-1, 1, 1).to(tau.dtype)  # (M, 1, 1)
         a = W * tau.unsqueeze(-1)
         sn, cs = torch.sin(a), torch.cos(a)
-        mods = []
-        for v, d1, d2 in ((sn, W * cs, -W * W * sn), (cs, -W * sn, -W * W * cs)):
-            mods.append(product_jet(B, Jet(v, (None,) * kx, (d1, d2)[:kt])))
-        cat = lambda parts: None if all(p is None for p in parts) else torch.cat(  # noqa: E731
-            [torch.zeros_like(B.value) if p is None else p.expand_as(B.value) for p in parts], dim=-1)
-        return Jet(
-            torch.cat([B.value, mods[0].value, mods[1].value], dim=-1),
-            tuple(cat([B.x[k], mods[0].x[k], mods[1].x[k]]) for k in range(kx)),
-            tuple(cat([B.t[k], mods[0].t[k], mods[1].t[k]]) for k in range(kt)),
-        )
+        mods = [product_jet(B, Jet(v, (None,) * kx, (d1, d2)[:kt]))
+                for v, d1, d2 in ((sn, W * cs, -W * W * sn), (cs, -W * sn, -W * W * cs))]
+        return cat_jets(B, *mods)
 
     @property
     def head(self) -> Tensor:

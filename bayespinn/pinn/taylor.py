@@ -303,6 +303,24 @@ def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet, *, fu
     return linear_stack(H, kx, kt, weights[-1], biases[-1])
 
 
+def cat_jets(*jets: Jet) -> Jet:
+    """Jets of feature blocks (components (M, N, d_i), None for zero) joined along the feature axis."""
+    first = jets[0].value
+
+    def cat(parts) -> Tensor | None:
+        if all(p is None for p in parts):
+            return None
+        full = [j.value if p is None else p for j, p in zip(jets, parts, strict=True)]
+        shape = lambda j: (*first.shape[:-1], j.value.shape[-1])  # noqa: E731
+        return torch.cat([torch.zeros(shape(j), dtype=first.dtype, device=first.device) if p is None
+                          else f.to(first.dtype).expand(shape(j)) for j, p, f in zip(jets, parts, full, strict=True)],
+                         dim=-1)
+
+    kx, kt = len(jets[0].x), len(jets[0].t)
+    return Jet(cat([j.value for j in jets]), tuple(cat([j.x[k] for j in jets]) for k in range(kx)),
+               tuple(cat([j.t[k] for j in jets]) for k in range(kt)))
+
+
 def contract_jet(basis: Jet, c: Tensor) -> Jet:
     """Jet of w = sum_d phi_d c_d from a basis jet (components (M, N, D)) and coefficients c (M, D)."""
     f = lambda a: None if a is None else torch.bmm(a, c.unsqueeze(-1))[..., 0]  # noqa: E731

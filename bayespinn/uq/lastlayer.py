@@ -3,8 +3,8 @@ integrated out analytically.
 
 With the hidden layers of a trained PINN frozen, the non-dimensional deflection is linear in the
 output weights beta: w = Phi beta, Phi the output layer's basis (`PINN.basis_jet`: the last hidden
-features and a constant, plus the modulated features and the static enrichment where the profile has
-them; the modulation frequency stays at the fitted EI). Every term of the PINN is then linear in beta
+features and a constant, plus the static enrichment and the free vibrations (or the modulated
+features) where the profile has them; their frequency stays at the fitted EI). Every term of the PINN is then linear in beta
 given theta = EI / EI_ref:
 
 * data (SI): y ~ N(D beta, sigma^2 I), D = U (a_u Phi + a_xx / L^2 Phi_xixi);
@@ -46,7 +46,7 @@ def feature_jet(model: PINN, member: int, xi: torch.Tensor, tau: torch.Tensor, k
     """Jet of the output layer's basis functions (N, D) of one member at points (N,), float64.
 
     The basis is `PINN.basis_jet`: the last hidden layer's activations, the constant (the output bias),
-    and with the fast profile's options the modulated features and the static enrichment.
+    and with the fast profile's options the static enrichment and the free vibrations.
     """
     net = model if (model.members == 1 and member == 0 and model.log_ei.dtype == torch.float64) else (
         model.member(member).double())
