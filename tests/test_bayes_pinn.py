@@ -48,34 +48,71 @@ def test_last_layer_marginal_is_exact(smoke_fit):
     cfg, data, problem, res = smoke_fit
     model = res.model()
     ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
-    # rebuild the same design matrices through the public pieces of the module
+    # rebuild the same design matrices through the public pieces of the module, the first mode's free
+    # vibrations at each theta, the higher modes without PDE rows (`LastLayer` docstring)
     from bayespinn.pinn.losses import moving_load
     from bayespinn.uq.lastlayer import feature_jet
 
     sc, pt = ll.sc, ll.pt
+    fv = model.free_vibration
+    assert fv is not None and fv.modes > 1  # the smoke profile has the fast profile's basis
+    low = fv.lowest()
     T = lambda a: torch.as_tensor(np.asarray(a, float), dtype=torch.float64)  # noqa: E731
     r = np.random.default_rng(0)
     xi_f, tau_f = T(r.uniform(0, 1, 40)), T(r.uniform(0, 1, 40))
     tb = T(r.uniform(0, 1, 10))
     xi_i = T(r.uniform(0, 1, 10))
-    j = feature_jet(model, 0, T(data.x / sc.L), T(data.t / sc.T), 2, 0)
-    D = sc.U * j.value
-    jf = feature_jet(model, 0, xi_f, tau_f, 4, 2)
-    P4, P2 = pt.stiffness * jf.dx(4), pt.inertia * jf.dt(2)
+    xi_d, tau_d = T(data.x / sc.L), T(data.t / sc.T)
+
+    def with_low(jet, xi, tau, kx, kt, lt, comp):
+        """comp(jet) with its trailing columns replaced by the first mode's at theta = exp(lt)."""
+        jl = low.jet(xi[None], tau[None], kx, kt, torch.tensor([lt], dtype=torch.float64))
+        jl = type(jet)(jl.value[0], tuple(c[0] for c in jl.x), tuple(c[0] for c in jl.t))
+        a = comp(jet).clone()
+        a[:, -low.n_features:] = comp(jl)
+        return a
+
     f = moving_load(xi_f[None], tau_f[None], pt)[0]
-    rows = []
-    for end in (0.0, 1.0):
-        jb = feature_jet(model, 0, torch.full_like(tb, end), tb, 2, 0)
-        rows += [jb.value, jb.dx(2)]
-    ji = feature_jet(model, 0, xi_i, torch.zeros_like(xi_i), 0, 1)
-    Bm, Cm = torch.cat(rows), torch.cat([ji.value, ji.dt(1)])
     y = T(data.value)
+
+    def brute(lt, ls):
+        j = feature_jet(model, 0, xi_d, tau_d, 2, 0)
+        D = sc.U * with_low(j, xi_d, tau_d, 2, 0, lt, lambda q: q.value)
+        jf = feature_jet(model, 0, xi_f, tau_f, 4, 2)
+        P4 = pt.stiffness * with_low(jf, xi_f, tau_f, 4, 2, lt, lambda q: q.dx(4))
+        P2 = pt.inertia * with_low(jf, xi_f, tau_f, 4, 2, lt, lambda q: q.dt(2))
+        k = P4.shape[1]
+        P4[:, k - fv.n_features : k - low.n_features] = 0.0
+        P2[:, k - fv.n_features : k - low.n_features] = 0.0
+        rows = []
+        for end in (0.0, 1.0):
+            e = torch.full_like(tb, end)
+            jb = feature_jet(model, 0, e, tb, 2, 0)
+            rows += [with_low(jb, e, tb, 2, 0, lt, lambda q: q.value), with_low(jb, e, tb, 2, 0, lt, lambda q: q.dx(2))]
+        z0 = torch.zeros_like(xi_i)
+        ji = feature_jet(model, 0, xi_i, z0, 0, 1)
+        Cm = torch.cat([with_low(ji, xi_i, z0, 0, 1, lt, lambda q: q.value), with_low(ji, xi_i, z0, 0, 1, lt, lambda q: q.dt(1))])
+        return _brute_force(ll, D, P4, P2, f, torch.cat(rows), Cm, y, lt, ls)
+
     pts = [(0.0, -7.0), (0.1, -7.5), (-0.2, -6.5)]
     ours = [float(ll.log_marginal(torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64))) for a, b in pts]
-    brute = [_brute_force(ll, D, P4, P2, f, Bm, Cm, y, a, b) for a, b in pts]
+    got = [brute(a, b) for a, b in pts]
     # equal up to one additive constant
-    d = np.array(ours) - np.array(brute)
-    assert np.ptp(d) < EXACT_TOL * max(1.0, abs(brute[0]))
+    d = np.array(ours) - np.array(got)
+    assert np.ptp(d) < EXACT_TOL * max(1.0, abs(got[0]))
+    # negative control: the free vibrations held at the fitted EI give a different likelihood
+    frozen = []
+    for a, b in pts:
+        j = feature_jet(model, 0, xi_d, tau_d, 2, 0)
+        jf = feature_jet(model, 0, xi_f, tau_f, 4, 2)
+        rows = []
+        for end in (0.0, 1.0):
+            jb = feature_jet(model, 0, torch.full_like(tb, end), tb, 2, 0)
+            rows += [jb.value, jb.dx(2)]
+        ji = feature_jet(model, 0, xi_i, torch.zeros_like(xi_i), 0, 1)
+        frozen.append(_brute_force(ll, sc.U * j.value, pt.stiffness * jf.dx(4), pt.inertia * jf.dt(2), f,
+                                   torch.cat(rows), torch.cat([ji.value, ji.dt(1)]), y, a, b))
+    assert np.ptp(np.array(ours) - np.array(frozen)) > 100 * EXACT_TOL * max(1.0, abs(got[0]))
 
 
 class _Gauss:

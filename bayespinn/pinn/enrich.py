@@ -93,7 +93,10 @@ class FreeVibration:
     beam equation with the simply supported boundary conditions at the current EI, so they add the dynamics
     with 2 K (events) coefficients and no freedom to bend the static solution. (The modulated features of
     `network` also represent the vibration, with far more freedom: under noise they absorb noise and bias
-    EI.) EI enters detached, like the modulated features: the frequency follows EI between steps.
+    EI.) In the network EI enters detached, like the modulated features: the frequency follows EI between
+    steps. The final head solve (`varpro.VaryingColumns`) and the last-layer posterior (`lastlayer`)
+    evaluate these columns at every EI they try, so the frequency carries its information about EI there.
+    With zero damping they solve the homogeneous PDE exactly (`pde_exact`): their PDE residual is zero.
 
     events : entry and exit times / T inside [0, 1); modes : K; frequency : W_1 [rad]; damping : zeta.
     """
@@ -107,14 +110,24 @@ class FreeVibration:
     def n_features(self) -> int:
         return 2 * self.modes * len(self.events)
 
-    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor) -> Jet:
-        """Jet of the features at points (M, N): components (M, N, n_features)."""
+    @property
+    def pde_exact(self) -> bool:
+        """True when each feature solves the homogeneous beam equation exactly (zero damping)."""
+        return self.damping == 0.0
+
+    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor, detach: bool = True) -> Jet:
+        """Jet of the features at points (M, N): components (M, N, n_features).
+
+        ``log_ei`` (M,) sets the frequency; with ``detach=False`` the jet is differentiable in it (the
+        exact-frequency head solve of `varpro` and the last-layer posterior use that).
+        """
+        lei = log_ei.detach() if detach else log_ei
         n = torch.arange(1, self.modes + 1, dtype=xi.dtype, device=xi.device)  # (K,)
         k = math.pi * n
         kxi = xi.unsqueeze(-1) * k  # (M, N, K)
         sx, cx = torch.sin(kxi), torch.cos(kxi)
         x_parts = [sx, cx, -sx, -cx]
-        W = (self.frequency * torch.exp(0.5 * log_ei.detach().to(xi.dtype))).view(-1, 1, 1) * n**2  # (M, 1, K)
+        W = (self.frequency * torch.exp(0.5 * lei.to(xi.dtype))).view(-1, 1, 1) * n**2  # (M, 1, K)
         z = self.damping
         a, w = z * W, W * math.sqrt(1.0 - z * z)
         vals, d1s, d2s = [], [], []
@@ -132,11 +145,20 @@ class FreeVibration:
                 vals.append(e * f0)
                 d1s.append(e * f1)
                 d2s.append(e * f2)
-        T0, T1, T2 = (torch.cat(v, dim=-1) for v in (vals, d1s, d2s))  # (M, N, 2 K E), per event: sin K, cos K
-        reps = 2 * len(self.events)
+        # columns mode-major, highest mode first: (mode K: event 0 sin, cos, event 1 ...), ..., mode 1, so
+        # the first mode's columns are the trailing ones (`lowest`)
+        shape = xi.shape + (self.n_features,)
+
+        def cols(X: Tensor, parts: list[Tensor]) -> Tensor:  # X (M, N, K); parts: 2E of (M, N, K)
+            return (X.flip(-1).unsqueeze(-1) * torch.stack(parts, -1).flip(-2)).reshape(shape)
 
         def xfac(m: int) -> Tensor:
-            return (k**m * x_parts[m % 4]).repeat(1, 1, reps)
+            return k**m * x_parts[m % 4]
 
         X0 = xfac(0)
-        return Jet(X0 * T0, tuple(xfac(m) * T0 for m in range(1, kx + 1)), tuple(X0 * Tt for Tt in (T1, T2)[:kt]))
+        return Jet(cols(X0, vals), tuple(cols(xfac(m), vals) for m in range(1, kx + 1)),
+                   tuple(cols(X0, d) for d in (d1s, d2s)[:kt]))
+
+    def lowest(self) -> FreeVibration:
+        """The first mode alone: its columns are the trailing 2 E columns of this one's (same order)."""
+        return FreeVibration(self.events, 1, self.frequency, self.damping)

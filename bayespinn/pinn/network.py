@@ -118,6 +118,8 @@ class PINN(nn.Module):
         n_osc = 0 if self.oscillator is None else 2 * (width + 1)
         self.osc_head = nn.Parameter(torch.zeros(members, n_osc, dtype=dtype))
         self.extras = tuple(extras)
+        if any(isinstance(e, FreeVibration) for e in self.extras[:-1]):
+            raise ValueError("a FreeVibration extra must come last")
         n_extra = sum(e.n_features for e in self.extras)
         self.extra_head = nn.Parameter(torch.zeros(members, n_extra, dtype=dtype))
 
@@ -242,6 +244,12 @@ class PINN(nn.Module):
         mods = [product_jet(B, Jet(v, (None,) * kx, (d1, d2)[:kt]))
                 for v, d1, d2 in ((sn, W * cs, -W * W * sn), (cs, -W * sn, -W * W * cs))]
         return cat_jets(B, *mods)
+
+    @property
+    def free_vibration(self) -> FreeVibration | None:
+        """The `FreeVibration` extra, if any: it is always the last extra, so its features are the
+        trailing `FreeVibration.n_features` columns of `basis_jet` and of `head`."""
+        return self.extras[-1] if self.extras and isinstance(self.extras[-1], FreeVibration) else None
 
     @property
     def head(self) -> Tensor:

@@ -210,9 +210,10 @@ class _Trainer:
     def _basis(self, col: Collocation):
         return field_jets(self.model, self.pt, col, self.objective.engine, basis=True)
 
-    def loss(self, col: Collocation, solve: bool = True):
+    def loss(self, col: Collocation, solve: bool = True, exact_frequency: bool = False):
         """(total, per-member totals (M,), terms). In varpro mode the head and log EI are first solved
-        (unless ``solve=False``) and written into the model."""
+        (unless ``solve=False``) and written into the model; with ``exact_frequency`` the free vibrations
+        are evaluated at every EI the solve tries (`varpro.VaryingColumns`)."""
         if not self.varpro:
             return self._call(col)
         basis = self._call(col)
@@ -223,12 +224,15 @@ class _Trainer:
             weights = self.objective.weights(prev, posterior) if prev is not None else (
                 self.objective.weights({k: torch.ones(self.M, device=self.device) for k in TERMS}, posterior)
                 if self.s.weighting == "adaptive" else self.objective.weights({}, posterior))
-            system = head_system(basis, pt, col, weights, self.objective.images)
+            vary = model.free_vibration if exact_frequency else None
+            system = head_system(basis, pt, col, weights, self.objective.images, vary=vary)
             c, sol = solve_head(system, model.log_ei.detach(), half_width=VARPRO_HALF_WIDTH,
                                 s_max=self.s.max_log_ei, data_scale=pt.data_scale, anchor=pt.anchor)
             model.set_head(c.to(self.dtype))
             with torch.no_grad():
                 model.log_ei.copy_(sol.to(self.dtype))
+            if vary is not None:  # the frequency moved with EI: the basis at the solved EI
+                basis = self._call(col)
         c = model.head.detach()
         jets = {k: contract_jet(j, c) for k, j in basis.items()}
         terms = terms_from_jets(jets, model.EI_ratio.detach(), pt, col, self.objective.images)
@@ -450,7 +454,7 @@ def fit(
         if tr.compiled:  # a compiled loss is specialised to the point counts
             tr.compiled = False
             tr._set_engine(s.engine)
-    total, per, terms = tr.loss(tr.col)
+    total, per, terms = tr.loss(tr.col, exact_frequency=tr.varpro)
     tr.guard(total.detach(), "final")
     losses = {k: terms[k].detach().cpu().double().numpy() for k in terms}
     losses["total"] = per.detach().cpu().double().numpy()

@@ -19,6 +19,15 @@ of deep neural networks: an adaptive basis viewpoint") extended to the unknown E
 faster than training the output layer and EI by Adam, which matters because EI is identified only
 through the precise balance of the PDE at the load.
 
+Exact frequency (`VaryingColumns`): the free-vibration columns (`enrich.FreeVibration`) are functions of
+EI themselves. During training they are evaluated at the current EI (the frequency follows EI between
+steps); for the final solve, `head_system(..., vary=fv)` keeps them apart and re-evaluates them at every
+s the golden search tries, so that J(s) includes what the vibration's frequency says about EI (the first
+mode's; the higher modes stay at the current EI, see `head_system`). Only
+the blocks that involve them are recomputed per s (rows of the data, the initial conditions and, with
+damping, the PDE; with zero damping their PDE rows vanish identically, and at the supports they vanish
+by construction).
+
 The Gram blocks are accumulated in float64 with a tiny relative ridge so that nearly collinear basis
 functions do not break the solve.
 """
@@ -31,7 +40,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from .losses import moving_load, pde_scale
+from .enrich import FreeVibration
+from .losses import data_order, moving_load, pde_scale
 from .problem import ProblemTensors
 from .sampling import Collocation
 from .taylor import Jet
@@ -44,11 +54,61 @@ GOLDEN_ITERS = 32
 _INVPHI = (math.sqrt(5.0) - 1.0) / 2.0
 
 
+def _tb(A: Tensor, B: Tensor) -> Tensor:
+    return torch.bmm(A.transpose(1, 2), B)
+
+
+@dataclass(frozen=True)
+class VaryingColumns:
+    """The trailing basis columns whose functions depend on s (free vibrations), kept apart.
+
+    Holds the points and row weights of each term and the fixed columns' rows there (float64), so that
+    `blocks(s)` gives the Gram blocks that involve the varying columns at any s.
+
+    fv : the FreeVibration; pde : None (zero damping) or (xi, tau, c1, c2, A1f, A2f, bf);
+    ic : (xi, tau, r, rows of value, rows of rate); data : (xi, tau, kx, a_u, a_xx, r, Adf, bd)
+    """
+
+    fv: FreeVibration
+    pde: tuple | None
+    ic: tuple
+    data: tuple
+
+    def blocks(self, s: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """(G_fv (M, Df, Fv), G_vv (M, Fv, Fv), g_v (M, Fv)) at s (M,)."""
+        e = torch.exp(s)[:, None, None]
+        xi, tau, r, Cv0, Cv1 = self.ic
+        j = self.fv.jet(xi, tau, 0, 1, s, detach=False)
+        V0, V1 = j.value * r, j.dt(1) * r
+        G_fv = _tb(Cv0, V0) + _tb(Cv1, V1)
+        G_vv = _tb(V0, V0) + _tb(V1, V1)
+        xi, tau, kx, a_u, a_xx, r, Adf, bd = self.data
+        j = self.fv.jet(xi, tau, kx, 0, s, detach=False)
+        Adv = 0.0
+        if a_u is not None:
+            Adv = a_u[None, :, None] * j.value
+        if a_xx is not None:
+            Adv = Adv + a_xx[None, :, None] * j.dx(2)
+        Adv = Adv * r
+        G_fv = G_fv + _tb(Adf, Adv)
+        G_vv = G_vv + _tb(Adv, Adv)
+        g_v = _tb(Adv, bd)[..., 0]
+        if self.pde is not None:
+            xi, tau, c1, c2, A1f, A2f, bf = self.pde
+            j = self.fv.jet(xi, tau, 4, 2, s, detach=False)
+            Rv = e * j.dx(4) * c1 + j.dt(2) * c2
+            G_fv = G_fv + e * _tb(A1f, Rv) + _tb(A2f, Rv)
+            G_vv = G_vv + _tb(Rv, Rv)
+            g_v = g_v + _tb(Rv, bf)[..., 0]
+        return G_fv, G_vv, g_v
+
+
 @dataclass(frozen=True)
 class HeadSystem:
     """Gram blocks (float64) of the head least-squares problem, per member.
 
-    P11, P12, P22 : (M, D, D); q1, q2 : (M, D); bb : (M,) (see module docstring).
+    P11, P12, P22 : (M, D, D); q1, q2 : (M, D); bb : (M,) (see module docstring); vary : the
+    s-dependent trailing columns, or None (then D is the whole basis, else the fixed columns only).
     """
 
     P11: Tensor
@@ -57,15 +117,20 @@ class HeadSystem:
     q1: Tensor
     q2: Tensor
     bb: Tensor
+    vary: VaryingColumns | None = None
 
     def gram(self, s: Tensor) -> tuple[Tensor, Tensor]:
         """G(s) (M, D, D) with the ridge, and g(s) (M, D), for s (M,)."""
         e = torch.exp(s)[:, None, None]
         G = e * e * self.P11 + e * self.P12 + self.P22
+        g = e[..., 0] * self.q1 + self.q2
+        if self.vary is not None:
+            G_fv, G_vv, g_v = self.vary.blocks(s)
+            G = torch.cat([torch.cat([G, G_fv], -1), torch.cat([G_fv.transpose(1, 2), G_vv], -1)], -2)
+            g = torch.cat([g, g_v], -1)
         diag = G.diagonal(dim1=-2, dim2=-1)
         lam = RIDGE * diag.mean(-1).clamp_min(1e-300)
         G = G + lam[:, None, None] * torch.eye(G.shape[-1], dtype=G.dtype, device=G.device)
-        g = e[..., 0] * self.q1 + self.q2
         return G, g
 
     def solve(self, s: Tensor) -> tuple[Tensor, Tensor]:
@@ -91,6 +156,7 @@ def head_system(
     col: Collocation,
     weights: dict[str, float | Tensor],
     images: bool = False,
+    vary: FreeVibration | None = None,
 ) -> HeadSystem:
     """Assemble the Gram blocks from the basis jets (any dtype; computed in float64, no gradient).
 
@@ -99,8 +165,23 @@ def head_system(
     basis : jets of the basis functions at 'pde', 'ic', 'bc', 'data' (components (M, N, D))
     pt, col : problem tensors and collocation points
     weights : weight of each term, floats or (M,) tensors (the objective's current weights)
+    vary : the network's FreeVibration (its trailing columns of the basis): evaluate those at every s
+        (see `VaryingColumns`) instead of taking them from ``basis``
     """
     dd = torch.float64
+    quiet_pde = None
+    if vary is not None:
+        # the first mode varies with s; the higher modes (fast, tiny, and under noise a source of spurious
+        # minima of J when re-evaluated) stay at the current EI, and with zero damping their PDE rows are
+        # dropped: they stand for exact homogeneous solutions whatever s is tried
+        low = vary.lowest()
+        d_all = basis["pde"].value.shape[-1]
+        d_fixed = d_all - low.n_features
+        if vary.pde_exact:
+            quiet_pde = slice(d_all - vary.n_features, d_fixed)
+        vary = low
+        basis = {k: Jet(j.value[..., :d_fixed], tuple(c[..., :d_fixed] if c is not None else None for c in j.x),
+                        tuple(c[..., :d_fixed] if c is not None else None for c in j.t)) for k, j in basis.items()}
 
     def w(name: str, n: int) -> Tensor | float:
         v = weights[name]
@@ -114,6 +195,9 @@ def head_system(
         rf = w("pde", nf)
         A1 = jp.dx(4).to(dd) * (rf * k * pt.stiffness)
         A2 = jp.dt(2).to(dd) * (rf * k * pt.inertia)
+        if quiet_pde is not None:
+            A1[..., quiet_pde] = 0.0
+            A2[..., quiet_pde] = 0.0
         f = moving_load(*col.pde, pt, images).to(dd)
         bf = f.unsqueeze(-1) * (rf * k)  # (M, Nf, 1)
         P11 = _gram(A1)
@@ -138,7 +222,17 @@ def head_system(
         P22 = P22 + _gram(Ad)
         q2 = q2 + _gram(Ad, bd)[..., 0]
         bb = bb + (bd**2).sum((1, 2))
-    return HeadSystem(P11, P12, P22, q1, q2, bb)
+        vc = None
+        if vary is not None:
+            D = lambda a: a.to(dd) if torch.is_tensor(a) else a  # noqa: E731
+            pde = None
+            if not vary.pde_exact:
+                pde = (D(col.pde[0]), D(col.pde[1]), D(rf * k * pt.stiffness), D(rf * k * pt.inertia), A1, A2, bf)
+            ic = (D(col.ic[0]), D(col.ic[1]), ri, D(ji.value * ri), D(ji.dt(1) * ri))
+            data = (D(pt.xi), D(pt.tau), data_order(pt), D(pt.a_u) if pt.needs_value else None,
+                    D(pt.a_xx) if pt.needs_curvature else None, rd, Ad, bd)
+            vc = VaryingColumns(vary, pde, ic, data)
+    return HeadSystem(P11, P12, P22, q1, q2, bb, vc)
 
 
 def solve_head(

@@ -13,9 +13,15 @@ Five draws estimate a spread to about +-35 %, so each member also reports its ow
 width of log EI, from the exact last-layer marginal likelihood of its trained features (`lastlayer`).
 The ensemble's variance of log EI is the conjugate pooling of the two estimates of the same quantity:
 (nu0 s_laplace^2 + (M - 1) S_between^2) / (nu0 + M - 1), nu0 = `LAPLACE_DOF`, so the between-member
-spread (which also carries training noise) dominates as M grows. sigma gets a conjugate posterior per
-member, sigma^2 ~ InvGamma((n - p_m)/2, RSS_m/2) on the member's residuals against the measured data, pooled,
-p_m the effective number of output weights the fit spends on the data (`LastLayer.effective_params`).
+spread (which also carries training noise) dominates as M grows.
+
+The noise level comes from the same last-layer marginal likelihood, not from the trained network's raw
+residuals: with its physics penalties of weight one, a network of 5 x 64 neurons absorbs part of the
+noise (its residuals under-state sigma by 25-35 % at 10-20 dB), while the marginal, whose output
+weights are held to the physics at the scale the network achieves, counts what the fit spent. Per
+member, p(sigma | EI_m, y) on a grid of log sigma (log-uniform prior); its mode sets the perturbation
+of randomise-then-optimise (phase 1 members) and the Laplace width (phase 2 members), and sigma's
+posterior draws are taken from the members' grids in equal shares.
 """
 
 from __future__ import annotations
@@ -23,7 +29,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -47,6 +53,48 @@ N_DRAWS = 4000
 #: members scattering more than this many times their own Laplace sd are flagged as not converged
 #: (with 5 members the sample sd is itself uncertain by ~35 %, so 3x is far outside chance)
 MAX_SCATTER_RATIO = 3.0
+
+
+#: the grid of log sigma: this many points over +-`SIGMA_GRID_HALF_WIDTH` around the fit's residual level
+SIGMA_GRID_POINTS = 241
+SIGMA_GRID_HALF_WIDTH = 1.2
+
+
+@dataclass(frozen=True)
+class SigmaGrid:
+    """p(log sigma | EI, y) of a last-layer model on a grid (log-uniform prior on sigma)."""
+
+    log_sigma: np.ndarray
+    prob: np.ndarray
+
+    @property
+    def mode(self) -> float:
+        return float(np.exp(self.log_sigma[int(np.argmax(self.prob))]))
+
+    def draws(self, k: int, rng: np.random.Generator) -> np.ndarray:
+        """k draws of sigma: a grid cell by its probability, uniform within it."""
+        h = self.log_sigma[1] - self.log_sigma[0]
+        i = rng.choice(self.prob.size, size=k, p=self.prob)
+        return np.exp(self.log_sigma[i] + h * (rng.random(k) - 0.5))
+
+
+def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
+    """The noise level's posterior for one member at its fitted EI (see the module docstring); with the
+    SNR-conditioned noise prior its log-normal density is added (as in the B-PINN)."""
+    import torch
+
+    center = 0.5 * math.log(max(ll.fit_rss, 1e-300) / max(ll.n, 1))
+    grid = center + np.linspace(-SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_POINTS)
+    lt = torch.tensor(math.log(ll.theta_fit), dtype=torch.float64)
+    with torch.no_grad(), torch_threads(1):
+        lp = np.array([float(ll.log_marginal(lt, torch.tensor(g, dtype=torch.float64))) for g in grid])
+    if noise.kind == "snr":
+        lp = lp - 0.5 * ((grid - math.log(noise.center)) / noise.log_sd) ** 2
+    if int(np.argmax(lp)) in (0, grid.size - 1):
+        log.warning("[ensemble] the noise level's posterior reaches the edge of its grid (%.3g .. %.3g)",
+                    math.exp(grid[0]), math.exp(grid[-1]))
+    p = np.exp(lp - lp.max())
+    return SigmaGrid(grid, p / p.sum())
 
 
 def _rto_data(data: Measurements, sigma: float, M: int, rng: np.random.Generator) -> tuple[Measurements, ...]:
@@ -75,59 +123,45 @@ def ensemble_posterior(
         log.warning("[ensemble] no measurements: EI is not identified, returning the prior")
         return prior_only(ei_prior, seed, t0, method="ensemble")
     quiet = not opts.progress
+
+    def last_layers(res) -> list[LastLayer]:
+        model = res.model("cpu")
+        with torch_threads(1):
+            return [LastLayer(model, m, base, data, np.random.default_rng(seeding.child(seed, "collocation", m)),
+                              n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
+                              beta_rel=settings.beta_rel, images=settings.images) for m in range(M)]
+
     # phase 1: all members on the measured data
     log.info("[ensemble] phase 1: %d members on the measured data", M)
     base = Problem.from_config(cfg, data)
     r1 = fit(base, settings, seed=seeding.stream(seed, "init"), members=M, device=opts.device, quiet=quiet)
-    pred1 = np.atleast_2d(_predict_data(r1, data))  # (M, n)
-    rss1 = np.sum((pred1 - data.value[None, :]) ** 2, axis=1) if n else np.zeros(M)
-    sigma_hat = float(np.sqrt(np.median(rss1) / n)) if n else 0.0
+    grids1 = [sigma_grid(ll, noise) for ll in last_layers(r1)]
+    sigma_hat = float(np.median([g.mode for g in grids1]))
     # phase 2: randomise-then-optimise
     rng = np.random.default_rng(seeding.stream(seed, "noise"))
     eta = rng.standard_normal(M)
     anchors = ei_prior.loc + ei_prior.log_sd * eta
-    if n and sigma_hat > 0:
-        pdata = _rto_data(data, sigma_hat, M, rng)
-        problem = Problem.from_config(cfg, pdata, noise_sd=sigma_hat, anchor=(anchors, ei_prior.log_sd))
-    else:
-        problem = Problem.from_config(cfg, data, anchor=(anchors, ei_prior.log_sd))
+    pdata = _rto_data(data, sigma_hat, M, rng)
+    problem = Problem.from_config(cfg, pdata, noise_sd=sigma_hat, anchor=(anchors, ei_prior.log_sd))
     s2 = replace(settings, epochs=max(1, int(RTO_FRACTION * settings.epochs)), lr=settings.lr * 0.3)
     log.info("[ensemble] phase 2: randomise-then-optimise (sigma_hat = %.3g)", sigma_hat)
     r2 = fit(problem, s2, seed=seeding.stream(seed, "collocation"), members=M, device=opts.device, quiet=quiet,
              init_state=r1.state)
     member_EI = np.atleast_1d(np.asarray(r2.EI, float))
     log_ei_m = np.log(member_EI)
-    # per-member local width and noise, on the measured data
-    model = r2.model("cpu")
-    lap_sd = np.full(M, ei_prior.log_sd)
-    rss = np.zeros(M)
-    dof = np.full(M, float(n))
-    lls = []
-    if n:
-        pred2 = np.atleast_2d(_predict_data(r2, data))
-        rss = np.sum((pred2 - data.value[None, :]) ** 2, axis=1)
-        for m in range(M):
-            with torch_threads(1):
-                ll = LastLayer(model, m, base, data, np.random.default_rng(seeding.child(seed, "collocation", m)),
-                               n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
-                               beta_rel=settings.beta_rel, images=settings.images)
-                ls = 0.5 * math.log(rss[m] / n)
-                lap_sd[m] = ll.laplace_sd_log_theta(math.log(ll.theta_fit), ls, ei_prior.log_sd)
-                # residual degrees of freedom: the output layer absorbs p_eff of the n measurements
-                dof[m] = max(n - ll.effective_params(math.log(ll.theta_fit), ls), 1.0)
-            lls.append(ll)
+    # per member, on the measured data: the noise level's grid posterior and the local width of log EI
+    lls = last_layers(r2)
+    grids = [sigma_grid(ll, noise) for ll in lls]
+    lap_sd = np.array([ll.laplace_sd_log_theta(math.log(ll.theta_fit), math.log(g.mode), ei_prior.log_sd)
+                       for ll, g in zip(lls, grids, strict=True)])
     between = float(np.var(log_ei_m, ddof=1)) if M > 1 else 0.0
     lap_var = float(np.mean(lap_sd**2))
     pooled = (LAPLACE_DOF * lap_var + (M - 1) * between) / (LAPLACE_DOF + M - 1)
     mu = float(np.mean(log_ei_m))
     draw_rng = np.random.default_rng(seeding.child(seed, "ensemble", 0))
     log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
-    if n:
-        pick = draw_rng.integers(0, M, N_DRAWS)
-        g = draw_rng.gamma(dof[pick] / 2.0, 1.0)
-        sigma = np.sqrt(rss[pick] / (2.0 * g))
-    else:
-        sigma = np.full(N_DRAWS, np.nan)
+    sigma = np.concatenate([g.draws(-(-N_DRAWS // M), draw_rng) for g in grids])[:N_DRAWS]
+    sigma = sigma[draw_rng.permutation(N_DRAWS)]
     ident = bool(math.sqrt(pooled) < IDENTIFIED_FRACTION * ei_prior.log_sd)
     info = {
         "members": M,
@@ -137,7 +171,7 @@ def ensemble_posterior(
         "laplace_sd_log_EI": math.sqrt(lap_var),
         "pooling": f"conjugate: Laplace variance with {LAPLACE_DOF} dof + between-member variance with {M - 1} dof",
         "sigma_hat_rto": sigma_hat,
-        "member_residual_dof": dof.tolist(),
+        "member_sigma_mode": [g.mode for g in grids],
         "identified": ident,
     }
     if M == 1:
@@ -153,26 +187,13 @@ def ensemble_posterior(
         log.warning("[ensemble] %s", msg)
         info["warnings"] = [msg]
     diag = {"fit_runtime_s": r1.runtime_s + r2.runtime_s, "beta_factor": r2.beta_factor}
-    predictor = None
-    if lls:
-        shift = math.log(base.EI_ref) - math.log(r2.beta_factor)
-        predictor = _MixturePredictor(
-            [LastLayerPredictor(ll, np.full(64, math.log(ll.theta_fit)), np.full(64, 0.5 * math.log(rss[m] / n)), shift)
-             for m, ll in enumerate(lls)]
-        )
+    shift = math.log(base.EI_ref) - math.log(r2.beta_factor)
+    predictor = _MixturePredictor(
+        [LastLayerPredictor(ll, np.full(64, math.log(ll.theta_fit)), np.full(64, math.log(g.mode)), shift)
+         for ll, g in zip(lls, grids, strict=True)]
+    )
     return Posterior("ensemble", np.exp(log_ei)[None, :], sigma[None, :], diagnostics=diag, info=info,
                      runtime_s=time.perf_counter() - t0, predictor=predictor)
-
-
-def _predict_data(res, data: Measurements) -> np.ndarray:
-    """Each member's prediction of the measured quantities, (M, n)."""
-    a_u, a_xx = data.weights
-    out = 0.0
-    if np.any(a_u):
-        out = out + a_u * res.predict(data.x, data.t, 0)
-    if np.any(a_xx):
-        out = out + a_xx * res.predict(data.x, data.t, 2)
-    return np.asarray(out)
 
 
 class _MixturePredictor:

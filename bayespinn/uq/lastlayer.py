@@ -4,7 +4,7 @@ integrated out analytically.
 With the hidden layers of a trained PINN frozen, the non-dimensional deflection is linear in the
 output weights beta: w = Phi beta, Phi the output layer's basis (`PINN.basis_jet`: the last hidden
 features and a constant, plus the static enrichment and the free vibrations (or the modulated
-features) where the profile has them; their frequency stays at the fitted EI). Every term of the PINN is then linear in beta
+features) where the profile has them; the free vibrations at each theta tried, see `LastLayer`). Every term of the PINN is then linear in beta
 given theta = EI / EI_ref:
 
 * data (SI): y ~ N(D beta, sigma^2 I), D = U (a_u Phi + a_xx / L^2 Phi_xixi);
@@ -59,6 +59,13 @@ def feature_jet(model: PINN, member: int, xi: torch.Tensor, tau: torch.Tensor, k
 class LastLayer:
     """Exact marginal likelihood of (theta, sigma) for one trained member; see the module docstring.
 
+    The first mode's free-vibration columns (`enrich.FreeVibration.lowest`, the trailing `nv` columns of
+    the basis) are functions of theta: they are re-evaluated at every theta (differentiably), so their
+    frequency carries its information about EI. They vanish at the supports, and with zero damping they
+    solve the homogeneous PDE exactly, so only their data and initial-condition rows are recomputed. The
+    higher modes stay at the fitted theta (re-evaluated, their fast phases would make the likelihood
+    jagged under noise) and, being exact homogeneous solutions, get no PDE rows.
+
     Parameters
     ----------
     model : trained PINN; member : which of its members
@@ -89,17 +96,28 @@ class LastLayer:
         pt = problem.tensors(1, dtype=torch.float64, **kw)
         self.pt = pt
         T = lambda a: torch.as_tensor(np.asarray(a, float), dtype=torch.float64)  # noqa: E731
+        fv_all = model.free_vibration
+        self.fv = fv_all.lowest() if fv_all is not None else None  # the first mode follows theta
+        self.nv = self.fv.n_features if self.fv is not None else 0
         # data design (SI)
         a_u, a_xx = data.weights
-        xi_d, tau_d = T(data.x / sc.L), T(data.t / sc.T)
-        j = feature_jet(model, member, xi_d, tau_d, 2, 0)
-        D = sc.U * (T(a_u)[:, None] * j.value + (T(a_xx) / sc.L**2)[:, None] * j.dx(2))
+        self.a_u, self.a_xx = T(a_u), T(a_xx)
+        self.xi_d, self.tau_d = T(data.x / sc.L), T(data.t / sc.T)
+        self.kx_d = 2 if np.any(a_xx != 0) else 0
+        j = feature_jet(model, member, self.xi_d, self.tau_d, 2, 0)
+        D = self._design(j.value, j.dx(2))
         y = T(data.value)
         # PDE pseudo-observations (non-dimensional residual, as in training but unscaled by beta)
         xi_f, tau_f = T(rng.uniform(0, 1, n_pde)), T(rng.uniform(0, 1, n_pde))
         jf = feature_jet(model, member, xi_f, tau_f, 4, 2)
         P4 = pt.stiffness * jf.dx(4)
         P2 = pt.inertia * jf.dt(2)
+        if fv_all is not None and fv_all.pde_exact and fv_all.modes > 1:
+            # the higher modes stay at the fitted EI; as exact homogeneous solutions they get no PDE rows
+            k_all = P4.shape[1]
+            hi = slice(k_all - fv_all.n_features, k_all - self.nv)
+            P4[:, hi] = 0.0
+            P2[:, hi] = 0.0
         f = moving_load(xi_f.unsqueeze(0), tau_f.unsqueeze(0), pt, images)[0]
         # boundary (u = u_xx = 0 at both ends) and initial (u = u_t = 0) pseudo-observations
         tb = T(rng.uniform(0, 1, n_bc))
@@ -108,10 +126,10 @@ class LastLayer:
             jb = feature_jet(model, member, torch.full_like(tb, end), tb, 2, 0)
             rows_b += [jb.value, jb.dx(2)]
         Bm = torch.cat(rows_b)
-        xi_i = T(rng.uniform(0, 1, n_ic))
-        ji = feature_jet(model, member, xi_i, torch.zeros_like(xi_i), 0, 1)
+        self.xi_i = T(rng.uniform(0, 1, n_ic))
+        ji = feature_jet(model, member, self.xi_i, torch.zeros_like(self.xi_i), 0, 1)
         Cm = torch.cat([ji.value, ji.dt(1)])
-        # the fitted output weights, and the residual scales they achieve
+        # the fitted output weights, and the residual scales they achieve (every column at the fitted EI)
         beta_fit = model.head[0].detach().double()
         self.theta_fit = float(torch.exp(model.log_ei[member].detach().double()))
         r_f = self.theta_fit * P4 @ beta_fit + P2 @ beta_fit - f
@@ -120,25 +138,74 @@ class LastLayer:
         self.s_i = max(float((Cm @ beta_fit).pow(2).mean().sqrt()), MIN_PSEUDO_SD)
         self.s_w = WEIGHT_PRIOR_FACTOR * float(beta_fit.abs().max())
         self.beta_fit = beta_fit
-        # Gram matrices
         self.n = y.numel()
-        self.G_dd, self.g_dy, self.yy = D.T @ D, D.T @ y, float(y @ y)
-        self.G44 = P4.T @ P4 / self.s_f**2
-        self.G42 = (P4.T @ P2 + P2.T @ P4) / self.s_f**2
-        self.G22 = P2.T @ P2 / self.s_f**2
-        self.g4f, self.g2f = P4.T @ f / self.s_f**2, P2.T @ f / self.s_f**2
-        self.ff = float(f @ f) / self.s_f**2
-        self.G_c = Bm.T @ Bm / self.s_b**2 + Cm.T @ Cm / self.s_i**2
         self.k = D.shape[1]
-        self.eye = torch.eye(self.k, dtype=torch.float64) / self.s_w**2
+        self.kf = kf = self.k - self.nv
         self.fit_rss = float(((D @ beta_fit - y) ** 2).sum())
+        # Gram matrices of the fixed columns
+        Df, P4f, P2f, Cf = D[:, :kf], P4[:, :kf], P2[:, :kf], Cm[:, :kf]
+        self.y, self.Df, self.Cf = y, Df, Cf
+        self.G_dd, self.g_dy, self.yy = Df.T @ Df, Df.T @ y, float(y @ y)
+        self.G44 = P4f.T @ P4f / self.s_f**2
+        self.G42 = (P4f.T @ P2f + P2f.T @ P4f) / self.s_f**2
+        self.G22 = P2f.T @ P2f / self.s_f**2
+        self.g4f, self.g2f = P4f.T @ f / self.s_f**2, P2f.T @ f / self.s_f**2
+        self.ff = float(f @ f) / self.s_f**2
+        Bf = Bm[:, :kf]  # the free vibrations vanish at the supports (u and u_xx)
+        self.G_c = Bf.T @ Bf / self.s_b**2 + Cf.T @ Cf / self.s_i**2
+        self.eye = torch.eye(self.k, dtype=torch.float64) / self.s_w**2
+        self.pde_v = None
+        if self.fv is not None and not self.fv.pde_exact:
+            self.pde_v = (xi_f, tau_f, P4f, P2f, f)
+
+    def _design(self, value: torch.Tensor, curv: torch.Tensor | None) -> torch.Tensor:
+        """Rows of the data design (SI) from the basis' values and xi-curvatures at the data points."""
+        sc = self.sc
+        out = sc.U * self.a_u[:, None] * value
+        if curv is not None:
+            out = out + sc.U * (self.a_xx / sc.L**2)[:, None] * curv
+        return out
+
+    def _fv_jet(self, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int, log_theta: torch.Tensor) -> Jet:
+        j = self.fv.jet(xi.unsqueeze(0), tau.unsqueeze(0), kx, kt, log_theta.reshape(1), detach=False)
+        return Jet(j.value[0], tuple(c[0] for c in j.x), tuple(c[0] for c in j.t))
+
+    def _varying(self, log_theta: torch.Tensor):
+        """The free vibrations' data design Dv (n, nv) and initial-condition rows Cv at theta."""
+        jd = self._fv_jet(self.xi_d, self.tau_d, self.kx_d, 0, log_theta)
+        Dv = self._design(jd.value, jd.dx(2) if self.kx_d else None)
+        ji = self._fv_jet(self.xi_i, torch.zeros_like(self.xi_i), 0, 1, log_theta)
+        Cv = torch.cat([ji.value, ji.dt(1)])
+        return Dv, Cv
+
+    def design(self, log_theta: torch.Tensor) -> torch.Tensor:
+        """The full data design (n, k) at theta (SI)."""
+        if self.fv is None:
+            return self.Df
+        return torch.cat([self.Df, self._varying(log_theta)[0]], dim=1)
 
     def _system(self, log_theta: torch.Tensor, log_sigma: torch.Tensor):
         th = torch.exp(log_theta)
         inv_s2 = torch.exp(-2 * log_sigma)
-        A = self.G_dd * inv_s2 + th**2 * self.G44 + th * self.G42 + self.G22 + self.G_c + self.eye
+        A = self.G_dd * inv_s2 + th**2 * self.G44 + th * self.G42 + self.G22 + self.G_c
         b = self.g_dy * inv_s2 + th * self.g4f + self.g2f
-        return A, b, inv_s2
+        if self.fv is not None:
+            Dv, Cv = self._varying(log_theta)
+            s_i2 = self.s_i**2
+            A_fv = self.Df.T @ Dv * inv_s2 + self.Cf.T @ Cv / s_i2
+            A_vv = Dv.T @ Dv * inv_s2 + Cv.T @ Cv / s_i2
+            b_v = Dv.T @ self.y * inv_s2
+            if self.pde_v is not None:  # damped free vibrations leave a PDE residual
+                xi_f, tau_f, P4f, P2f, f = self.pde_v
+                jf = self._fv_jet(xi_f, tau_f, 4, 2, log_theta)
+                Rv = th * self.pt.stiffness * jf.dx(4) + self.pt.inertia * jf.dt(2)
+                s_f2 = self.s_f**2
+                A_fv = A_fv + (th * P4f + P2f).T @ Rv / s_f2
+                A_vv = A_vv + Rv.T @ Rv / s_f2
+                b_v = b_v + Rv.T @ f / s_f2
+            A = torch.cat([torch.cat([A, A_fv], 1), torch.cat([A_fv.T, A_vv], 1)], 0)
+            b = torch.cat([b, b_v])
+        return A + self.eye, b, inv_s2
 
     def log_marginal(self, log_theta: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
         """log p(y, pseudo-observations | theta, sigma) up to a constant (differentiable scalar)."""
@@ -160,7 +227,9 @@ class LastLayer:
     def effective_params(self, log_theta: float, log_sigma: float) -> float:
         """Degrees of freedom the output weights spend on the data: trace(D A^-1 D') / sigma^2 [-]."""
         _, cov = self.weights_posterior(log_theta, log_sigma)
-        return float(torch.trace(self.G_dd @ cov)) * math.exp(-2.0 * log_sigma)
+        with torch.no_grad():
+            D = self.design(torch.tensor(log_theta, dtype=torch.float64))
+        return float(torch.trace(D.T @ D @ cov)) * math.exp(-2.0 * log_sigma)
 
     def laplace_sd_log_theta(self, log_theta: float, log_sigma: float, prior_sd: float) -> float:
         """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's."""
@@ -175,12 +244,18 @@ class LastLayer:
         """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)."""
         sc = self.sc
         T = lambda a: torch.as_tensor(np.array(a, float).ravel(), dtype=torch.float64)  # noqa: E731
-        j = feature_jet(self.model, self.member, T(x) / sc.L, T(t) / sc.T, kx, 0)
-        Phi = j.dx(kx)
+        xi, tau = T(x) / sc.L, T(t) / sc.T
+        j = feature_jet(self.model, self.member, xi, tau, kx, 0)
+        Phi_f = j.dx(kx)[:, : self.kf]
         scale = sc.U / sc.L**kx
-        out = np.empty((len(draws_log_theta), Phi.shape[0]))
+        out = np.empty((len(draws_log_theta), Phi_f.shape[0]))
         for i, (lt, ls) in enumerate(zip(draws_log_theta, draws_log_sigma, strict=True)):
             mean, cov = self.weights_posterior(float(lt), float(ls))
+            Phi = Phi_f
+            if self.fv is not None:
+                with torch.no_grad():
+                    jv = self._fv_jet(xi, tau, kx, 0, torch.tensor(float(lt), dtype=torch.float64))
+                Phi = torch.cat([Phi_f, jv.dx(kx)], dim=1)
             Lc = torch.linalg.cholesky(cov + 1e-30 * torch.eye(self.k, dtype=torch.float64))
             z = torch.as_tensor(rng.standard_normal(self.k), dtype=torch.float64)
             out[i] = (Phi @ (mean + Lc @ z)).numpy() * scale
