@@ -54,10 +54,6 @@ GOLDEN_ITERS = 32
 _INVPHI = (math.sqrt(5.0) - 1.0) / 2.0
 
 
-def _tb(A: Tensor, B: Tensor) -> Tensor:
-    return torch.bmm(A.transpose(1, 2), B)
-
-
 @dataclass(frozen=True)
 class VaryingColumns:
     """The trailing basis columns whose functions depend on s (free vibrations), kept apart.
@@ -80,8 +76,8 @@ class VaryingColumns:
         xi, tau, r, Cv0, Cv1 = self.ic
         j = self.fv.jet(xi, tau, 0, 1, s, detach=False)
         V0, V1 = j.value * r, j.dt(1) * r
-        G_fv = _tb(Cv0, V0) + _tb(Cv1, V1)
-        G_vv = _tb(V0, V0) + _tb(V1, V1)
+        G_fv = _gram(Cv0, V0) + _gram(Cv1, V1)
+        G_vv = _gram(V0, V0) + _gram(V1, V1)
         xi, tau, kx, a_u, a_xx, r, Adf, bd = self.data
         j = self.fv.jet(xi, tau, kx, 0, s, detach=False)
         Adv = 0.0
@@ -90,16 +86,16 @@ class VaryingColumns:
         if a_xx is not None:
             Adv = Adv + a_xx[None, :, None] * j.dx(2)
         Adv = Adv * r
-        G_fv = G_fv + _tb(Adf, Adv)
-        G_vv = G_vv + _tb(Adv, Adv)
-        g_v = _tb(Adv, bd)[..., 0]
+        G_fv = G_fv + _gram(Adf, Adv)
+        G_vv = G_vv + _gram(Adv, Adv)
+        g_v = _gram(Adv, bd)[..., 0]
         if self.pde is not None:
             xi, tau, c1, c2, A1f, A2f, bf = self.pde
             j = self.fv.jet(xi, tau, 4, 2, s, detach=False)
             Rv = e * j.dx(4) * c1 + j.dt(2) * c2
-            G_fv = G_fv + e * _tb(A1f, Rv) + _tb(A2f, Rv)
-            G_vv = G_vv + _tb(Rv, Rv)
-            g_v = g_v + _tb(Rv, bf)[..., 0]
+            G_fv = G_fv + e * _gram(A1f, Rv) + _gram(A2f, Rv)
+            G_vv = G_vv + _gram(Rv, Rv)
+            g_v = g_v + _gram(Rv, bf)[..., 0]
         return G_fv, G_vv, g_v
 
 

@@ -187,12 +187,6 @@ class LastLayer:
         Cv = torch.cat([ji.value, ji.dt(1)])
         return Dv, Cv
 
-    def design(self, log_theta: torch.Tensor) -> torch.Tensor:
-        """The full data design (n, k) at theta (SI)."""
-        if self.fv is None:
-            return self.Df
-        return torch.cat([self.Df, self._varying(log_theta)[0]], dim=1)
-
     def _system(self, log_theta: torch.Tensor, log_sigma: torch.Tensor):
         th = torch.exp(log_theta)
         inv_s2 = torch.exp(-2 * log_sigma)
@@ -232,13 +226,6 @@ class LastLayer:
             mean = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
             cov = torch.cholesky_inverse(Lc)
         return mean, cov
-
-    def effective_params(self, log_theta: float, log_sigma: float) -> float:
-        """Degrees of freedom the output weights spend on the data: trace(D A^-1 D') / sigma^2 [-]."""
-        _, cov = self.weights_posterior(log_theta, log_sigma)
-        with torch.no_grad():
-            D = self.design(torch.tensor(log_theta, dtype=torch.float64))
-        return float(torch.trace(D.T @ D @ cov)) * math.exp(-2.0 * log_sigma)
 
     def laplace_sd_log_theta(self, log_theta: float, log_sigma: float, prior_sd: float) -> float:
         """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's."""
