@@ -67,7 +67,7 @@ def test_last_layer_marginal_is_exact(smoke_fit):
     def with_low(jet, xi, tau, kx, kt, lt, comp):
         """comp(jet) with its trailing columns replaced by the first mode's at theta = exp(lt)."""
         jl = low.jet(xi[None], tau[None], kx, kt, torch.tensor([lt], dtype=torch.float64))
-        jl = type(jet)(jl.value[0], tuple(c[0] for c in jl.x), tuple(c[0] for c in jl.t))
+        jl = jl.map(lambda c: c[0])
         a = comp(jet).clone()
         a[:, -low.n_features:] = comp(jl)
         return a

@@ -162,3 +162,16 @@ class FreeVibration:
     def lowest(self) -> FreeVibration:
         """The first mode alone: its columns are the trailing 2 E columns of this one's (same order)."""
         return FreeVibration(self.events, 1, self.frequency, self.damping)
+
+    def split(self, d_all: int) -> tuple[FreeVibration, int, slice | None]:
+        """How a basis of `d_all` columns ending in these features is treated when EI varies.
+
+        Returns (the first mode, re-evaluated at every EI tried; the number of columns before it, which
+        stay fixed; the higher modes' columns, whose PDE rows are dropped, or None with damping). The
+        higher modes stay at the fitted EI: re-evaluated, their fast phases make the objective jagged
+        under noise; being exact homogeneous solutions (zero damping), they need no PDE rows.
+        """
+        low = self.lowest()
+        d_fixed = d_all - low.n_features
+        quiet = slice(d_all - self.n_features, d_fixed) if self.pde_exact else None
+        return low, d_fixed, quiet

@@ -55,10 +55,14 @@ class Jet(NamedTuple):
     x: tuple[Tensor | None, ...] = ()
     t: tuple[Tensor | None, ...] = ()
 
+    def map(self, fn: Callable[[Tensor], Tensor]) -> Jet:
+        """fn applied to every present component (absent ones stay None), e.g. an index or a slice."""
+        f = lambda c: None if c is None else fn(c)  # noqa: E731
+        return Jet(fn(self.value), tuple(f(c) for c in self.x), tuple(f(c) for c in self.t))
+
     def squeeze(self, dim: int = -1) -> Jet:
         """The same jet with `dim` squeezed from every component (e.g. the output feature axis)."""
-        sq = lambda c: None if c is None else c.squeeze(dim)  # noqa: E731
-        return Jet(sq(self.value), tuple(sq(c) for c in self.x), tuple(sq(c) for c in self.t))
+        return self.map(lambda c: c.squeeze(dim))
 
     def dx(self, k: int) -> Tensor:
         """k-th derivative along x (k = 0 is the value), zeros where the component is absent."""

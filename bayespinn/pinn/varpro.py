@@ -79,13 +79,7 @@ class VaryingColumns:
         G_fv = _gram(Cv0, V0) + _gram(Cv1, V1)
         G_vv = _gram(V0, V0) + _gram(V1, V1)
         xi, tau, kx, a_u, a_xx, r, Adf, bd = self.data
-        j = self.fv.jet(xi, tau, kx, 0, s, detach=False)
-        Adv = 0.0
-        if a_u is not None:
-            Adv = a_u[None, :, None] * j.value
-        if a_xx is not None:
-            Adv = Adv + a_xx[None, :, None] * j.dx(2)
-        Adv = Adv * r
+        Adv = _data_rows(self.fv.jet(xi, tau, kx, 0, s, detach=False), a_u, a_xx) * r
         G_fv = G_fv + _gram(Adf, Adv)
         G_vv = G_vv + _gram(Adv, Adv)
         g_v = _gram(Adv, bd)[..., 0]
@@ -141,6 +135,14 @@ class HeadSystem:
         return c, J
 
 
+def _data_rows(j: Jet, a_u: Tensor | None, a_xx: Tensor | None) -> Tensor:
+    """Rows a_u phi + a_xx phi_xixi (M, P, D) of the data term from the basis jet at the data points."""
+    out = a_u[None, :, None] * j.value if a_u is not None else 0.0
+    if a_xx is not None:
+        out = out + a_xx[None, :, None] * j.dx(2)
+    return out
+
+
 def _gram(A: Tensor, B: Tensor | None = None) -> Tensor:
     B = A if B is None else B
     return torch.bmm(A.transpose(1, 2), B)
@@ -167,17 +169,9 @@ def head_system(
     dd = torch.float64
     quiet_pde = None
     if vary is not None:
-        # the first mode varies with s; the higher modes (fast, tiny, and under noise a source of spurious
-        # minima of J when re-evaluated) stay at the current EI, and with zero damping their PDE rows are
-        # dropped: they stand for exact homogeneous solutions whatever s is tried
-        low = vary.lowest()
-        d_all = basis["pde"].value.shape[-1]
-        d_fixed = d_all - low.n_features
-        if vary.pde_exact:
-            quiet_pde = slice(d_all - vary.n_features, d_fixed)
-        vary = low
-        basis = {k: Jet(j.value[..., :d_fixed], tuple(c[..., :d_fixed] if c is not None else None for c in j.x),
-                        tuple(c[..., :d_fixed] if c is not None else None for c in j.t)) for k, j in basis.items()}
+        # the first mode varies with s, the higher modes stay (`FreeVibration.split`)
+        vary, d_fixed, quiet_pde = vary.split(basis["pde"].value.shape[-1])
+        basis = {k: j.map(lambda c: c[..., :d_fixed]) for k, j in basis.items()}
 
     def w(name: str, n: int) -> Tensor | float:
         v = weights[name]
@@ -210,10 +204,9 @@ def head_system(
             P22 = P22 + _gram(blk)
         nd = jd.value.shape[1]
         rd = w("data", nd)
-        Ad = pt.a_u.to(dd)[None, :, None] * jd.value.to(dd) if pt.needs_value else 0.0
-        if pt.needs_curvature:
-            Ad = Ad + pt.a_xx.to(dd)[None, :, None] * jd.dx(2).to(dd)
-        Ad = Ad * rd
+        a_u = pt.a_u.to(dd) if pt.needs_value else None
+        a_xx = pt.a_xx.to(dd) if pt.needs_curvature else None
+        Ad = _data_rows(jd.map(lambda c: c.to(dd)), a_u, a_xx) * rd
         bd = pt.value.to(dd).unsqueeze(-1) * rd
         P22 = P22 + _gram(Ad)
         q2 = q2 + _gram(Ad, bd)[..., 0]
@@ -225,8 +218,7 @@ def head_system(
             if not vary.pde_exact:
                 pde = (D(col.pde[0]), D(col.pde[1]), D(rf * k * pt.stiffness), D(rf * k * pt.inertia), A1, A2, bf)
             ic = (D(col.ic[0]), D(col.ic[1]), ri, D(ji.value * ri), D(ji.dt(1) * ri))
-            data = (D(pt.xi), D(pt.tau), data_order(pt), D(pt.a_u) if pt.needs_value else None,
-                    D(pt.a_xx) if pt.needs_curvature else None, rd, Ad, bd)
+            data = (D(pt.xi), D(pt.tau), data_order(pt), a_u, a_xx, rd, Ad, bd)
             vc = VaryingColumns(vary, pde, ic, data)
     return HeadSystem(P11, P12, P22, q1, q2, bb, vc)
 

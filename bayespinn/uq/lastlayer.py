@@ -61,8 +61,7 @@ def feature_jet(model: PINN, member: int, xi: torch.Tensor, tau: torch.Tensor, k
         model.member(member).double())
     with torch.no_grad():
         j = net.basis_jet(xi.double().unsqueeze(0), tau.double().unsqueeze(0), kx, kt)
-    return Jet(j.value[0], tuple(c[0] if c is not None else None for c in j.x),
-               tuple(c[0] if c is not None else None for c in j.t))
+    return j.map(lambda c: c[0])
 
 
 class LastLayer:
@@ -106,7 +105,9 @@ class LastLayer:
         self.pt = pt
         T = lambda a: torch.as_tensor(np.asarray(a, float), dtype=torch.float64)  # noqa: E731
         fv_all = model.free_vibration
-        self.fv = fv_all.lowest() if fv_all is not None else None  # the first mode follows theta
+        self.fv, quiet_pde = None, None
+        if fv_all is not None:  # the first mode follows theta, the higher modes stay (`FreeVibration.split`)
+            self.fv, _, quiet_pde = fv_all.split(model.head.shape[1])
         self.nv = self.fv.n_features if self.fv is not None else 0
         # data design (SI)
         a_u, a_xx = data.weights
@@ -121,12 +122,9 @@ class LastLayer:
         jf = feature_jet(model, member, xi_f, tau_f, 4, 2)
         P4 = pt.stiffness * jf.dx(4)
         P2 = pt.inertia * jf.dt(2)
-        if fv_all is not None and fv_all.pde_exact and fv_all.modes > 1:
-            # the higher modes stay at the fitted EI; as exact homogeneous solutions they get no PDE rows
-            k_all = P4.shape[1]
-            hi = slice(k_all - fv_all.n_features, k_all - self.nv)
-            P4[:, hi] = 0.0
-            P2[:, hi] = 0.0
+        if quiet_pde is not None:
+            P4[:, quiet_pde] = 0.0
+            P2[:, quiet_pde] = 0.0
         f = moving_load(xi_f.unsqueeze(0), tau_f.unsqueeze(0), pt, images)[0]
         # boundary (u = u_xx = 0 at both ends) and initial (u = u_t = 0) pseudo-observations
         tb = T(rng.uniform(0, 1, n_bc))
@@ -177,7 +175,7 @@ class LastLayer:
 
     def _fv_jet(self, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int, log_theta: torch.Tensor) -> Jet:
         j = self.fv.jet(xi.unsqueeze(0), tau.unsqueeze(0), kx, kt, log_theta.reshape(1), detach=False)
-        return Jet(j.value[0], tuple(c[0] for c in j.x), tuple(c[0] for c in j.t))
+        return j.map(lambda c: c[0])
 
     def _varying(self, log_theta: torch.Tensor):
         """The free vibrations' data design Dv (n, nv) and initial-condition rows Cv at theta."""
