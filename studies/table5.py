@@ -5,10 +5,12 @@ finite-element truth (deflection in mm, moment in kN m), the 90 % interval of th
 posterior draws, and the share of span points where the 90 % credible band contains the FE truth
 (`bayespinn.report.table5`), with the paper's point values beside them.
 
-A run folder stores posterior draws of EI and sigma but not the posterior predictive (a PINN's network
-is not saved), so each level is inferred again with the same seed. When table4 has run, its data
-(`<out>/table4/<method>/snr<S>/data.csv`) are reused and the re-inferred EI posterior is checked
-against that run's summary; otherwise the data are simulated from the seed, as `run` would.
+A run on synthetic data stores its Table 5 (`table5.json`, written with the report). When table4's run
+folder for a level (`<out>/table4/<method>/snr<S>/`) holds it for the same seed, SNR and profile, it is
+taken from there: nothing is inferred again. Otherwise (an older run folder, or no table4 run) the level
+is inferred again with the same seed, a PINN's network not being stored: on table4's data when its run
+folder exists (the re-inferred EI posterior is then checked against that run's summary), else on data
+simulated from the seed, as `run` would.
 
     python studies/table5.py --methods modal --out reports/paper
 """
@@ -89,33 +91,58 @@ def level_data(cfg, out: Path, key: str, snr, seed: int):
     return data, truth, "simulated from the seed (no table4 run folder)", None
 
 
+def stored(out: Path, key: str, snr, args) -> tuple[dict, dict] | None:
+    """(table 5, summary entry) from table4's run folder for this level when that run stored its Table 5
+    (`table5.json`) with the same seed, SNR and profile; None otherwise."""
+    folder = out / "table4" / key / f"snr{snr_label(snr)}"
+    try:
+        t5doc = json.loads((folder / "table5.json").read_text(encoding="utf-8"))
+        summ = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        return None
+    same = all(
+        d.get("seed") == args.seed and d.get("snr_db") == snr and d.get("profile") == args.profile
+        for d in (t5doc, summ)
+    )
+    if not same or key not in t5doc.get("methods", {}) or key not in summ.get("methods", {}):
+        return None
+    return t5doc["methods"][key], summ["methods"][key]
+
+
 def one(cfg, method: str, key: str, snr, args, out: Path) -> dict:
-    data, truth, source, t4 = level_data(cfg, out, key, snr, args.seed)
-    post = infer(method, data, cfg, args.seed, c.run_options(args, snr))
-    entry = post.summary(truth)
-    summary = {
-        "schema": "bayespinn.summary/1",
-        "case": "deflection",
-        "snr_db": snr,
-        "seed": args.seed,
-        "profile": args.profile,
-        "truth": truth,
-        "methods": {key: entry},
-    }
-    t5 = table5(RunResult(data, truth, {key: post}, summary, {}), cfg, key)
-    same = None
-    if t4 is not None:
-        ref = t4["methods"][key]["EI"]["mean"]
-        same = bool(abs(entry["EI"]["mean"] - ref) <= SAME_POSTERIOR_RTOL * abs(ref))
-        if not same:
-            log.warning(
-                "warning: %s at %s: EI mean %.10g differs from table4's %.10g (other profile or "
-                "options?)",
-                key,
-                c.snr_text(snr),
-                entry["EI"]["mean"],
-                ref,
-            )
+    hit = stored(out, key, snr, args)
+    if hit is not None:
+        t5, entry = hit
+        source = f"stored by table4's run {out.name}/table4/{key}/snr{snr_label(snr)} (not inferred again)"
+        same, runtime = True, entry.get("runtime_s")
+    else:
+        data, truth, source, t4 = level_data(cfg, out, key, snr, args.seed)
+        post = infer(method, data, cfg, args.seed, c.run_options(args, snr))
+        entry = post.summary(truth)
+        summary = {
+            "schema": "bayespinn.summary/1",
+            "case": "deflection",
+            "snr_db": snr,
+            "seed": args.seed,
+            "profile": args.profile,
+            "truth": truth,
+            "methods": {key: entry},
+        }
+        t5 = table5(RunResult(data, truth, {key: post}, summary, {}), cfg, key)
+        runtime = post.runtime_s
+        same = None
+        if t4 is not None:
+            ref = t4["methods"][key]["EI"]["mean"]
+            same = bool(abs(entry["EI"]["mean"] - ref) <= SAME_POSTERIOR_RTOL * abs(ref))
+            if not same:
+                log.warning(
+                    "warning: %s at %s: EI mean %.10g differs from table4's %.10g (other profile or "
+                    "options?)",
+                    key,
+                    c.snr_text(snr),
+                    entry["EI"]["mean"],
+                    ref,
+                )
     cov = {
         q: float(np.mean([r[q]["coverage"] for r in t5["rows"]])) for q in ("deflection", "moment")
     }
@@ -127,7 +154,7 @@ def one(cfg, method: str, key: str, snr, args, out: Path) -> dict:
         "band_coverage_mean": cov,
         "source": source,
         "same_posterior_as_table4": same,
-        "runtime_s": post.runtime_s,
+        "runtime_s": runtime,
     }
 
 

@@ -114,6 +114,13 @@ def test_table4_then_table5_modal(tmp_path):
     t5 = load(tmp_path / "table5.json")
     (row,) = t5["rows"]
     assert row["snr_db"] == 30.0 and row["same_posterior_as_table4"] is True
+    assert row["source"].startswith("stored by table4's run")  # the run folder's table5.json, no re-inference
+    # without the stored table the level is inferred again on table4's data: the same table comes back
+    (tmp_path / "table4" / "modal_mcmc" / "snr30" / "table5.json").unlink()
+    study("table5.py", "--profile", "smoke", "--methods", "modal", "--snr", "30", "--out", str(tmp_path), "--quiet")
+    (again,) = load(tmp_path / "table5.json")["rows"]
+    assert again["source"].startswith("data of table4") and again["same_posterior_as_table4"] is True
+    assert again["table5"] == row["table5"]
     assert [round(x["t"], 2) for x in row["table5"]["rows"]] == [0.60, 1.22, 1.82]
     for x in row["table5"]["rows"]:
         for q in ("deflection", "moment"):

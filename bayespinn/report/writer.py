@@ -5,6 +5,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
+import json
+
 from ..config import Config
 from . import predictive as pv
 from .content import run_document, title
@@ -36,6 +38,27 @@ def run_table5s(result, cfg: Config) -> tuple[list[dict], list[str]]:
     return out, notes
 
 
+#: the run folder's Table 5 metrics in SI units (written when the truth is known), so that a study can
+#: collect them without inferring again (a PINN's network is not stored)
+TABLE5_FILE = "table5.json"
+TABLE5_SCHEMA = "bayespinn.run_table5/1"
+
+
+def write_table5_json(folder: Path, result, t5s: list[dict]) -> Path:
+    from ..uq.posterior import jsonable
+
+    s = result.summary
+    doc = {
+        "schema": TABLE5_SCHEMA,
+        "case": s.get("case"),
+        "snr_db": s.get("snr_db"),
+        "seed": s.get("seed"),
+        "profile": s.get("profile"),
+        "methods": {t5["method"]: t5 for t5 in t5s},
+    }
+    return write_text(folder / TABLE5_FILE, json.dumps(jsonable(doc), indent=2) + "\n")
+
+
 def write_reports(
     result, cfg: Config, folder: str | Path, *, figures: bool = True
 ) -> dict[str, Path]:
@@ -49,8 +72,12 @@ def write_reports(
     figs, fig_notes = make_figures(result, cfg, folder) if figures else ([], [])
     t5s, t5_notes = run_table5s(result, cfg)
     blocks = run_document(result, cfg, figs, fig_notes, t5s, t5_notes)
+    if t5s:
+        write_table5_json(folder, result, t5s)
     write_text(folder / "report.md", render_markdown(blocks))
     write_text(folder / "report.html", render_html(blocks, folder, title(result.summary)))
     paths = {f.name: folder / f.name for f in figs}
     paths.update({"report.md": folder / "report.md", "report.html": folder / "report.html"})
+    if t5s:
+        paths["table5.json"] = folder / TABLE5_FILE
     return paths
