@@ -44,7 +44,7 @@ def bench_modal(n_points: int = 100, n_modes: int = 10, batch: int = BENCH_BATCH
 
 
 def bench(device: str = "cpu", progress: bool = True) -> dict:
-    """All sections: derivatives (Taylor vs nested autograd), ensemble (sequential vs together), modal."""
+    """All sections: derivatives (Taylor vs nested autograd), ensemble (one after another vs batched vs parallel processes), modal."""
     import torch
 
     from .pinn.bench import bench_derivatives, bench_ensemble
@@ -53,7 +53,7 @@ def bench(device: str = "cpu", progress: bool = True) -> dict:
     res = {"schema": "bayespinn.bench/1", "device": device, "threads": threads}
     log.info("bench: derivatives (Taylor mode vs nested autograd) ...")
     res["derivatives"] = bench_derivatives(device=device)
-    log.info("bench: ensemble (sequential vs together) ...")
+    log.info("bench: ensemble (one after another vs batched vs parallel processes) ...")
     res["ensemble"] = bench_ensemble(device=device)
     log.info("bench: modal likelihood ...")
     res["modal"] = bench_modal()

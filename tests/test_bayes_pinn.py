@@ -132,9 +132,13 @@ def _ok(draws, mean, sd):
 def test_nuts_recovers_gaussian_and_negative_control():
     mean, sd = [0.3, -6.0], [0.02, 0.07]
     s = NUTSSettings(4, 200, 300)
-    draws = nuts(_Gauss(mean, sd), np.array(mean), np.array(sd), s, seed=0, progress=False)
+    draws = nuts(_Gauss(mean, sd), np.array(mean), np.diag(sd), s, seed=0, progress=False)
     assert draws.shape == (4, 300, 2) and _ok(draws, mean, sd)
-    wrong = nuts(_Gauss(mean, [0.04, 0.07]), np.array(mean), np.array(sd), s, seed=0, progress=False)
+    # whitened with a factor 5 off in one direction and a shifted centre: the adaptation still finds it
+    off = nuts(_Gauss(mean, sd), np.array(mean) + [0.02, 0.0], np.diag([5 * sd[0], sd[1]]), s, seed=0,
+               progress=False)
+    assert _ok(off, mean, sd)
+    wrong = nuts(_Gauss(mean, [0.04, 0.07]), np.array(mean), np.diag(sd), s, seed=0, progress=False)
     assert not _ok(wrong, mean, sd)
 
 

@@ -56,6 +56,36 @@ def test_local_results_do_not_depend_on_workers():
     assert _strip(one) == _strip(two)
 
 
+def _ensemble(executor, seed=3):
+    import numpy as np
+
+    from bayespinn.data.synthetic import simulate
+    from bayespinn.uq.methods import infer
+
+    cfg = preset()
+    data = simulate(cfg, 20.0, seed=1)
+    post = infer("ensemble", data, cfg, seed, RunOptions(profile="smoke", members=3, device="cpu", executor=executor))
+    assert post.diagnostics["training"] == "one task per member"
+    return post.info["member_EI"], post.info["member_sigma_mode"], np.asarray(post.EI).ravel()
+
+
+def test_ensemble_members_do_not_depend_on_workers():
+    one = _ensemble(Executor("local", workers=1))
+    two = _ensemble(Executor("local", workers=2))
+    assert one[0] == two[0] and one[1] == two[1] and (one[2] == two[2]).all()
+    # negative control: the comparison sees a different seed
+    assert _ensemble(Executor("local", workers=2), seed=4)[0] != two[0]
+
+
+def test_bench_ensemble_reports_what_the_toolkit_uses():
+    from bayespinn.pinn.bench import bench_ensemble
+
+    r = bench_ensemble(members=2, points=40, repeats=1, warmup=1, parallel_steps=2, workers=2)
+    assert r["together"] == "parallel processes" and r["workers"] == 2
+    assert r["speedup"] == r["parallel_speedup"] == r["sequential_s"] / r["parallel_s"]
+    assert r["batched_speedup"] == r["sequential_ms_per_epoch"] / r["batched_ms_per_epoch"]
+
+
 def test_bad_executor_is_input_error():
     from bayespinn.errors import InputError
 
@@ -73,6 +103,9 @@ def test_ray_matches_local():
         local = _study(Executor("local", workers=2))
         remote = _study(Executor("ray"))
         assert _strip(local) == _strip(remote)
+        # an ensemble's members as Ray tasks: the same members as in the local pool
+        a, b = _ensemble(Executor("local", workers=2)), _ensemble(Executor("ray"))
+        assert a[0] == b[0] and a[1] == b[1] and (a[2] == b[2]).all()
     finally:
         ray.shutdown()
 

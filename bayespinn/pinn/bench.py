@@ -136,6 +136,26 @@ def bench_derivatives(
     return out
 
 
+def _member_settings(points: int, width: int, depth: int, optimizer: str) -> TrainSettings:
+    return TrainSettings.for_profile(
+        "fast", optimizer=optimizer, width=width, depth=depth, n_pde=points, n_bc=max(points // 5, 2),
+        n_ic=max(points // 5, 1), compile=False, resample_every=0, lbfgs_iters=0,
+    )
+
+
+def _train_member_steps(task: tuple) -> float:
+    """One member built and stepped `steps` times in this process (an executor task); returns its seconds."""
+    from .train import _Trainer
+
+    m, steps, points, width, depth, optimizer = task
+    t0 = time.perf_counter()
+    tr = _Trainer(_deflection_problem(), _member_settings(points, width, depth, optimizer),
+                  np.random.SeedSequence(0, spawn_key=(m,)), 1, torch.device("cpu"))
+    for _ in range(steps):
+        tr.adam_step()
+    return time.perf_counter() - t0
+
+
 def bench_ensemble(
     members: int = 8,
     points: int = 1000,
@@ -146,26 +166,34 @@ def bench_ensemble(
     optimizer: str = "adam",
     repeats: int = 8,
     warmup: int = 2,
+    parallel_steps: int = 20,
+    workers: int | None = None,
 ) -> dict:
-    """M members trained one after another versus together as one batched network.
+    """M members trained one after another versus in parallel, measured in the same run.
 
-    One "epoch" is one training step of every member (all loss terms, backward, Adam step). Sequential:
-    M single networks stepped in turn; batched: one `PINN` with M members (weights (M, d_in, d_out),
-    torch.bmm), as `fit(..., members=M)` trains them.
+    One "epoch" is one training step of every member (all loss terms, backward, Adam step).
+
+    - sequential: M single networks stepped in turn in this process (torch's thread setting);
+    - batched: one `PINN` with M members (weights (M, d_in, d_out), torch.bmm), as the ensemble trains
+      on CUDA; median of `repeats` rounds interleaved with the sequential ones;
+    - parallel (CPU): how the ensemble trains on a CPU: each member one task of the local executor (a
+      process pool of `workers`, default one per core, one torch thread per process), `parallel_steps`
+      steps each, end to end (building the networks and the pool's start included), against the same
+      work done one member after another in this process.
 
     Returns
     -------
-    dict with members, points, sequential_ms_per_epoch, batched_ms_per_epoch,
-    speedup = sequential / batched.
+    dict with members, points, sequential_ms_per_epoch, batched_ms_per_epoch, `together` (what the
+    ensemble uses on this device: "parallel processes" on a CPU, "batched" on CUDA) and `speedup`
+    (sequential / together, as the contract defines it); on a CPU also workers, parallel_steps,
+    sequential_s, parallel_s, parallel_ms_per_epoch, parallel_speedup (= speedup) and batched_speedup.
     """
+    from ..executor import Executor, cpu_count
     from .train import _Trainer  # the training loop's own step
 
     dev = torch.device(device)
     prob = _deflection_problem()
-    s = TrainSettings.for_profile(
-        "fast", optimizer=optimizer, width=width, depth=depth, n_pde=points, n_bc=max(points // 5, 2),
-        n_ic=max(points // 5, 1), compile=False, resample_every=0, lbfgs_iters=0,
-    )
+    s = _member_settings(points, width, depth, optimizer)
     seq = [_Trainer(prob, s, np.random.SeedSequence(0, spawn_key=(m,)), 1, dev) for m in range(members)]
     bat = _Trainer(prob, s, 0, members, dev)
 
@@ -174,10 +202,25 @@ def bench_ensemble(
             tr.adam_step()
 
     med = _interleaved({"seq": sequential, "bat": bat.adam_step}, dev, warmup, repeats)
-    return {
+    out = {
         "members": members,
         "points": points,
         "sequential_ms_per_epoch": med["seq"],
         "batched_ms_per_epoch": med["bat"],
         "speedup": med["seq"] / med["bat"],
     }
+    if dev.type == "cpu" and parallel_steps > 0:
+        tasks = [(m, parallel_steps, points, width, depth, optimizer) for m in range(members)]
+        n = min(workers or cpu_count(), members)
+        t0 = time.perf_counter()
+        for t in tasks:
+            _train_member_steps(t)
+        t_seq = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        Executor("local", workers=n).map(_train_member_steps, tasks, desc="bench members", progress=False)
+        t_par = time.perf_counter() - t0
+        out.update(workers=n, parallel_steps=parallel_steps, sequential_s=t_seq, parallel_s=t_par,
+                   parallel_ms_per_epoch=1e3 * t_par / parallel_steps, parallel_speedup=t_seq / t_par,
+                   batched_speedup=out["speedup"], speedup=t_seq / t_par)
+    out["together"] = "parallel processes" if "parallel_speedup" in out else "batched"
+    return out

@@ -111,11 +111,12 @@ def _dtype(name: str) -> torch.dtype:
     return torch.float64 if name == "float64" else torch.float32
 
 
-def _member_seeds(seed: int | np.random.SeedSequence, members: int) -> list[tuple[int, int]]:
-    """(init seed, collocation seed) for each member: member m's streams depend on (seed, m) only."""
+def _member_seeds(seed: int | np.random.SeedSequence, members: int, first: int = 0) -> list[tuple[int, int]]:
+    """(init seed, collocation seed) for members first .. first + members - 1: member m's streams depend
+    on (seed, m) only."""
     root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(int(seed))
     out = []
-    for m in range(members):
+    for m in range(first, first + members):
         key = tuple(root.spawn_key) + (m,)
         s = [np.random.SeedSequence(root.entropy, spawn_key=key + (k,)).generate_state(2, np.uint64) for k in (0, 1)]
         out.append(tuple(int(a[0] >> np.uint64(1)) for a in s))
@@ -137,10 +138,11 @@ def _want_compile(settings: TrainSettings, device: torch.device) -> bool:
 class _Trainer:
     """State of one fit: network, points, optimisers. `fit` drives it."""
 
-    def __init__(self, problem: Problem, s: TrainSettings, seed, members: int, device: torch.device):
+    def __init__(self, problem: Problem, s: TrainSettings, seed, members: int, device: torch.device,
+                 first_member: int = 0):
         self.problem, self.s, self.M, self.device = problem, s, members, device
         self.dtype = _dtype(s.dtype)
-        seeds = _member_seeds(seed, members)
+        seeds = _member_seeds(seed, members, first_member)
         init_gens = [torch.Generator().manual_seed(a) for a, _ in seeds]
         self.col_gens = [torch.Generator().manual_seed(b) for _, b in seeds]
         self.model = _build_model(problem, s, members, init_gens).to(device)
@@ -369,6 +371,7 @@ def fit(
     resume: bool = True,
     init_state: dict | None = None,
     callback: Callable[[int, dict], None] | None = None,
+    first_member: int = 0,
 ) -> FitResult:
     """Train a PINN (or M of them together) on a problem and return the EI estimate.
 
@@ -388,6 +391,9 @@ def fit(
         seeded initial weights
     callback : called as callback(step, info) after each Adam step / L-BFGS chunk, info holding
         'phase' ('adam' or 'lbfgs'), 'EI_raw' (M,) and 'model' (the PINN being trained); an exception raised by it stops the fit (the checkpoint stays)
+    first_member : the index of the first member trained: ``fit(..., members=1, first_member=m)`` trains
+        member m of a ``members=M`` fit on its own (its initial weights and points; how the ensemble
+        spreads members over processes)
 
     Returns
     -------
@@ -405,7 +411,9 @@ def fit(
         raise ValueError(f"members must be >= 1, got {members}")
     dev = _resolve_device(device)
     t0 = time.perf_counter()
-    tr = _Trainer(problem, settings, seed, M, dev)
+    if first_member < 0:
+        raise ValueError(f"first_member must be >= 0, got {first_member}")
+    tr = _Trainer(problem, settings, seed, M, dev, first_member)
     if init_state is not None:
         tr.model.load_state_dict(init_state)
     path = Path(checkpoint) if checkpoint is not None else None

@@ -92,7 +92,10 @@ def coverage_study(
 ) -> dict:
     """Run the study; returns the contract's coverage JSON (plus per-replicate records)."""
     t0 = time.perf_counter()
-    opts = dataclasses.replace(opts or RunOptions(), snr_db=snr_db, progress=False)
+    # the replicates are the parallel tasks: inside one, an ensemble's members train one after another in
+    # that worker (same results as any other executor; no pool nested in a pool)
+    opts = dataclasses.replace(opts or RunOptions(), snr_db=snr_db, progress=False,
+                               executor=Executor("local", workers=1))
     if method == "modal" and opts.mcmc is None:
         from .sampler import MCMCSettings
 
