@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import json
 import logging
 from pathlib import Path
-
-import json
 
 from ..config import Config
 from . import predictive as pv
