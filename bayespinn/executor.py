@@ -36,16 +36,27 @@ def _single_thread() -> None:
 
 
 class _OneThread:
-    """Call fn(task) with one BLAS thread, so floating-point results never depend on where a task ran."""
+    """Call fn(task) with one BLAS and one torch thread, so floating-point results never depend on where a
+    task ran (a worker process, a Ray worker, or this process when there is one worker)."""
 
     def __init__(self, fn: Callable):
         self.fn = fn
 
     def __call__(self, task):
+        import sys
+
         from threadpoolctl import threadpool_limits
 
-        with threadpool_limits(1):
-            return self.fn(task)
+        torch = sys.modules.get("torch")
+        old = torch.get_num_threads() if torch is not None else None
+        try:
+            if torch is not None:
+                torch.set_num_threads(1)
+            with threadpool_limits(1):
+                return self.fn(task)
+        finally:
+            if torch is not None and old is not None:
+                torch.set_num_threads(old)
 
 
 def cpu_count() -> int:

@@ -168,3 +168,25 @@ def test_ensemble_without_data_is_not_identified():
     p = infer("ensemble", empty, cfg, 0, RunOptions(profile="smoke", members=3))
     s = p.summary()
     assert s["identified"] is False and "not identified" in s["note"]
+
+
+def test_ensemble_pooling_skips_members_without_a_local_width():
+    from bayespinn.uq.ensemble import LAPLACE_DOF, pool_log_ei
+
+    log_ei = np.log([1.01e9, 1.027e9, 1.030e9, 1.005e9, 1.059e9])
+    lap = np.array([0.018, 0.010, 0.0105, 0.0137, 0.02])
+    between, lap_var, nu, pooled = pool_log_ei(log_ei, lap, 0.5)
+    assert nu == LAPLACE_DOF and np.isclose(lap_var, np.mean(lap**2))
+    assert np.isclose(pooled, (nu * lap_var + 4 * between) / (nu + 4))
+    # member 4 without a peak: left out of the Laplace term, which then counts 4/5 of the dof
+    lap_nan = lap.copy()
+    lap_nan[4] = np.nan
+    _, lv, nu2, pooled2 = pool_log_ei(log_ei, lap_nan, 0.5)
+    assert np.isclose(lv, np.mean(lap[:4] ** 2)) and np.isclose(nu2, 0.8 * LAPLACE_DOF)
+    assert np.isclose(pooled2, (nu2 * lv + 4 * between) / (nu2 + 4))
+    # negative control: the old rule (such a member at the prior's sd) blows the interval up ~10x
+    lap_prior = lap.copy()
+    lap_prior[4] = 0.5
+    assert np.sqrt(pool_log_ei(log_ei, lap_prior, 0.5)[3]) > 5 * np.sqrt(pooled2)
+    # one member without a width and no spread: the prior
+    assert pool_log_ei(log_ei[:1], [np.nan], 0.5)[3] == 0.25

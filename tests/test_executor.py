@@ -77,6 +77,28 @@ def test_ensemble_members_do_not_depend_on_workers():
     assert _ensemble(Executor("local", workers=2), seed=4)[0] != two[0]
 
 
+def test_sweep_levels_do_not_depend_on_workers(tmp_path):
+    """Levels are executor tasks with the ensemble's members run inside them: same numbers, same files."""
+    import json
+
+    from bayespinn.sweep import sweep
+
+    opts = dataclasses.replace(SMALL, members=2, progress=False)
+    docs = []
+    for w in (1, 2):
+        out = tmp_path / f"w{w}"
+        docs.append(sweep(preset(), levels=[None, 20.0], methods=["modal", "ensemble"], seed=0, out=out,
+                          opts=dataclasses.replace(opts, executor=Executor("local", workers=w))))
+        assert {p.name for p in out.iterdir()} >= {"snrclean", "snr20", "sweep.json", "report.html"}
+        assert json.loads((out / "snr20" / "summary.json").read_text())["snr_db"] == 20.0
+
+    def means(doc):
+        return [(lv["snr_db"], {k: m["EI"]["mean"] for k, m in lv["methods"].items()}) for lv in doc["levels"]]
+
+    assert means(docs[0]) == means(docs[1])
+    assert [lv["snr_db"] for lv in docs[0]["levels"]] == [None, 20.0]
+
+
 def test_bench_ensemble_reports_what_the_toolkit_uses():
     from bayespinn.pinn.bench import bench_ensemble
 

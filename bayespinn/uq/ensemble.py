@@ -104,6 +104,25 @@ def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
     return SigmaGrid(grid, p / p.sum())
 
 
+def pool_log_ei(log_ei_m: np.ndarray, lap_sd: np.ndarray, prior_log_sd: float) -> tuple[float, float, float, float]:
+    """(between-member variance, mean Laplace variance, its dof, pooled variance) of log EI.
+
+    pooled = (nu lap_var + (M - 1) between) / (nu + M - 1), nu = `LAPLACE_DOF` x the share of members
+    with a local width: a member whose last-layer marginal has no peak in EI at its own fit (nan; seen at
+    10 dB, its curvature there positive) gives none, and the Laplace term rests on the others. With no
+    width and no spread (one member, nan) the prior's variance is returned.
+    """
+    log_ei_m, lap_sd = np.asarray(log_ei_m, float), np.asarray(lap_sd, float)
+    M = log_ei_m.size
+    between = float(np.var(log_ei_m, ddof=1)) if M > 1 else 0.0
+    ok = np.isfinite(lap_sd)
+    lap_var = float(np.mean(lap_sd[ok] ** 2)) if ok.any() else 0.0
+    nu = LAPLACE_DOF * int(ok.sum()) / M
+    den = nu + (M - 1)
+    pooled = (nu * lap_var + (M - 1) * between) / den if den > 0 else prior_log_sd**2
+    return between, lap_var, nu, pooled
+
+
 def _rto_data(data: Measurements, sigma: float, M: int, rng: np.random.Generator) -> tuple[Measurements, ...]:
     return tuple(data.with_values(data.value + sigma * rng.standard_normal(len(data))) for _ in range(M))
 
@@ -286,9 +305,13 @@ def ensemble_posterior(
     with torch_threads(1):
         lap_sd = np.array([ll.laplace_sd_log_theta(math.log(ll.theta_fit), math.log(g.mode), ei_prior.log_sd)
                            for ll, g in zip(lls, grids, strict=True)])
-    between = float(np.var(log_ei_m, ddof=1)) if M > 1 else 0.0
-    lap_var = float(np.mean(lap_sd**2))
-    pooled = (LAPLACE_DOF * lap_var + (M - 1) * between) / (LAPLACE_DOF + M - 1)
+    between, lap_var, lap_dof, pooled = pool_log_ei(log_ei_m, lap_sd, ei_prior.log_sd)
+    warn = []
+    if not np.isfinite(lap_sd).all():
+        bad = [int(i) for i in np.flatnonzero(~np.isfinite(lap_sd))]
+        warn.append(f"member(s) {bad}: the last-layer marginal likelihood has no peak in EI at the member's own "
+                    "fit, so they give no local (Laplace) width; the interval rests on the other members' widths "
+                    "and on the spread between members")
     mu = float(np.mean(log_ei_m))
     draw_rng = np.random.default_rng(seeding.child(seed, "ensemble", 0))
     log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
@@ -298,10 +321,10 @@ def ensemble_posterior(
     info = {
         "members": M,
         "member_EI": member_EI.tolist(),
-        "member_laplace_sd_log_EI": lap_sd.tolist(),
+        "member_laplace_sd_log_EI": [float(v) if np.isfinite(v) else None for v in lap_sd],
         "between_sd_log_EI": math.sqrt(between),
         "laplace_sd_log_EI": math.sqrt(lap_var),
-        "pooling": f"conjugate: Laplace variance with {LAPLACE_DOF} dof + between-member variance with {M - 1} dof",
+        "pooling": f"conjugate: Laplace variance with {lap_dof:g} dof + between-member variance with {M - 1} dof",
         "sigma_hat_rto": sigma_hat,
         "member_sigma_mode": [g.mode for g in grids],
         "identified": ident,
@@ -316,8 +339,11 @@ def ensemble_posterior(
         msg = (f"the members disagree: their EI spread (sd {math.sqrt(between):.3f} in log EI) is "
                f"{math.sqrt(between / lap_var):.1f} x each member's own uncertainty ({math.sqrt(lap_var):.3f}); "
                "training has not converged to one answer, so this interval mostly measures optimisation scatter")
+        warn.append(msg)
+    for msg in warn:
         log.warning("[ensemble] %s", msg)
-        info["warnings"] = [msg]
+    if warn:
+        info["warnings"] = warn
     diag = {"fit_runtime_s": p1.runtime_s + p2.runtime_s,
             "beta_factor": float(np.median(p2.beta_factor)),
             "training": "batched (one network of M members)" if batched else "one task per member"}

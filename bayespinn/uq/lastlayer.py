@@ -226,13 +226,15 @@ class LastLayer:
         return mean, cov
 
     def laplace_sd_log_theta(self, log_theta: float, log_sigma: float, prior_sd: float) -> float:
-        """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's."""
+        """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's; nan when the
+        log marginal is not concave in log theta there (no local width to report)."""
         lt = torch.tensor(log_theta, dtype=torch.float64, requires_grad=True)
         ls = torch.tensor(log_sigma, dtype=torch.float64)
         (g,) = torch.autograd.grad(self.log_marginal(lt, ls), lt, create_graph=True)
         (h,) = torch.autograd.grad(g, lt)
-        prec = -float(h) + 1.0 / prior_sd**2
-        return 1.0 / math.sqrt(prec) if prec > 0 else prior_sd
+        if not -float(h) > 0:
+            return float("nan")
+        return 1.0 / math.sqrt(-float(h) + 1.0 / prior_sd**2)
 
     def predictive(self, x, t, kx: int, draws_log_theta, draws_log_sigma, rng: np.random.Generator) -> np.ndarray:
         """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)."""
