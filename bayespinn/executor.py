@@ -59,6 +59,19 @@ class _OneThread:
                 torch.set_num_threads(old)
 
 
+#: share of a GPU a Ray task asks for when it trains on CUDA (four tasks per GPU)
+GPU_FRACTION = 0.25
+
+
+def task_resources(device: str | None) -> dict:
+    """Ray resources of one task: a CPU, and a share of a GPU when it trains on CUDA (a Ray worker sees no
+    GPU unless its task asks for one)."""
+    out: dict = {"num_cpus": 1}
+    if str(device or "cpu").startswith("cuda"):
+        out["num_gpus"] = GPU_FRACTION
+    return out
+
+
 def cpu_count() -> int:
     try:
         return max(1, len(os.sched_getaffinity(0)))

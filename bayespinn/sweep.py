@@ -43,13 +43,14 @@ def run_level(task: Level) -> RunResult:
 def sweep(cfg: Config, *, levels: list, methods: list[str], seed: int, out: Path, opts: RunOptions) -> dict:
     """Run every level into out/snr<level>/ (levels spread over `opts.executor`), then write sweep.json and
     the combined reports."""
-    from .executor import Executor
+    from .executor import Executor, task_resources
 
     out = Path(out)
     executor = opts.executor or Executor()
     inner = replace(opts, executor=Executor("local", workers=1), progress=False)
     tasks = [Level(cfg, snr, tuple(methods), seed, out / f"snr{snr_label(snr)}", inner) for snr in levels]
-    results = executor.map(run_level, tasks, desc="sweep levels", progress=opts.progress)
+    results = executor.map(run_level, tasks, desc="sweep levels", progress=opts.progress,
+                           resources=task_resources(opts.device))
     entries = [{"snr_db": t.snr_db, "folder": t.out.name, "methods": r.summary["methods"]}
                for t, r in zip(tasks, results, strict=True)]
     doc = {"schema": "bayespinn.sweep/1", "case": cfg.case, "seed": seed, "levels": entries}

@@ -137,3 +137,11 @@ def test_replicate_options_are_picklable():
 
     opts = dataclasses.replace(SMALL, executor=Executor())
     assert pickle.loads(pickle.dumps(opts)) == opts
+
+
+def test_ray_tasks_ask_for_a_gpu_share_only_when_training_on_cuda():
+    from bayespinn.executor import GPU_FRACTION, task_resources
+
+    assert task_resources("cpu") == {"num_cpus": 1} == task_resources(None)
+    assert task_resources("cuda") == {"num_cpus": 1, "num_gpus": GPU_FRACTION}
+    assert task_resources("cuda:1")["num_gpus"] == GPU_FRACTION

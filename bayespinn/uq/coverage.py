@@ -18,7 +18,7 @@ from scipy import stats
 from .. import seeding
 from ..config import Config
 from ..data.synthetic import simulate
-from ..executor import Executor
+from ..executor import Executor, task_resources
 from .methods import KEYS, RunOptions, infer
 
 
@@ -101,7 +101,8 @@ def coverage_study(
 
         opts = dataclasses.replace(opts, mcmc=MCMCSettings.for_coverage())
     tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in range(replicates)]
-    recs = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress)
+    recs = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress,
+                                        resources=task_resources(opts.device if method != "modal" else "cpu"))
     hits = int(sum(r["hit"] for r in recs))
     ranks = np.array([r["rank"] for r in recs])
     p = float(stats.kstest(ranks, "uniform").pvalue) if replicates > 1 else float("nan")

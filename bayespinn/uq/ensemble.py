@@ -197,10 +197,10 @@ def train_member(task: MemberTask) -> dict:
 
 
 def _phase_tasks(tasks: list[MemberTask], executor, desc: str, progress: bool) -> _Phase:
-    from ..executor import Executor
+    from ..executor import Executor, task_resources
 
     ex = executor or Executor()
-    res = ex.map(train_member, tasks, desc=desc, progress=progress, resources={"num_cpus": 1})
+    res = ex.map(train_member, tasks, desc=desc, progress=progress, resources=task_resources("cpu"))
     return _Phase(
         EI=np.array([r["EI"] for r in res]),
         beta_factor=np.array([r["beta_factor"] for r in res]),
