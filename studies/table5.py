@@ -113,7 +113,7 @@ def one(cfg, method: str, key: str, snr, args, out: Path) -> dict:
     hit = stored(out, key, snr, args)
     if hit is not None:
         t5, entry = hit
-        source = f"stored by table4's run {out.name}/table4/{key}/snr{snr_label(snr)} (not inferred again)"
+        source = f"stored by table4's run table4/{key}/snr{snr_label(snr)} (not inferred again)"
         same, runtime = True, entry.get("runtime_s")
     else:
         data, truth, source, t4 = level_data(cfg, out, key, snr, args.seed)
