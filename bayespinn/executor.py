@@ -44,19 +44,15 @@ class _OneThread:
 
     def __call__(self, task):
         import sys
+        from contextlib import nullcontext
 
         from threadpoolctl import threadpool_limits
 
-        torch = sys.modules.get("torch")
-        old = torch.get_num_threads() if torch is not None else None
-        try:
-            if torch is not None:
-                torch.set_num_threads(1)
-            with threadpool_limits(1):
-                return self.fn(task)
-        finally:
-            if torch is not None and old is not None:
-                torch.set_num_threads(old)
+        from .threads import torch_threads
+
+        # torch only when the task's process has it loaded: pure-numpy tasks never import it
+        with torch_threads(1) if "torch" in sys.modules else nullcontext(), threadpool_limits(1):
+            return self.fn(task)
 
 
 #: share of a GPU a Ray task asks for when it trains on CUDA (four tasks per GPU)
