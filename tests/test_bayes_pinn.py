@@ -32,9 +32,10 @@ def smoke_fit():
 
 
 def _brute_force(ll: LastLayer, D, P4, P2, f, Bm, Cm, y, lt, ls):
-    """log N of all observations with the output weights integrated out, in observation space."""
+    """log N of all observations with the stiffness-scaled output weights gamma = theta beta integrated out,
+    in observation space (the `lastlayer` docstring's model: data rows D / theta, PDE rows P4 + P2 / theta)."""
     th, s = math.exp(lt), math.exp(ls)
-    Z = torch.cat([D, th * P4 + P2, Bm, Cm])
+    Z = torch.cat([D / th, P4 + P2 / th, Bm, Cm])
     t = torch.cat([y, f, torch.zeros(Bm.shape[0] + Cm.shape[0], dtype=torch.float64)])
     noise = torch.cat([
         torch.full((D.shape[0],), s**2), torch.full((P4.shape[0],), ll.s_f**2),

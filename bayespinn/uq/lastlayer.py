@@ -4,21 +4,40 @@ integrated out analytically.
 With the hidden layers of a trained PINN frozen, the non-dimensional deflection is linear in the
 output weights beta: w = Phi beta, Phi the output layer's basis (`PINN.basis_jet`: the last hidden
 features and a constant, plus the static enrichment and the free vibrations (or the modulated
-features) where the profile has them; the free vibrations at each theta tried, see `LastLayer`). Every term of the PINN is then linear in beta
-given theta = EI / EI_ref:
+features) where the profile has them; the free vibrations at each theta tried, see `LastLayer`). Every
+term of the PINN is then linear in beta given theta = EI / EI_ref. The model is stated for the
+stiffness-scaled weights gamma = theta beta (the output layer of theta w, which the load fixes whatever
+EI is, as EI u_xxxx balances the load), so the weight prior and the boundary and initial conditions do
+not depend on the unknown stiffness:
 
-* data (SI): y ~ N(D beta, sigma^2 I), D = U (a_u Phi + a_xx / L^2 Phi_xixi);
-* PDE pseudo-observations: 0 ~ N(theta S Phi_xixixixi beta + I_c Phi_tautau beta - f/q, s_f^2);
-* boundary and initial pseudo-observations: 0 ~ N(B beta, s_b^2), 0 ~ N(C beta, s_i^2);
-* prior beta ~ N(0, s_w^2 I).
+* data (SI): y ~ N(D gamma / theta, sigma^2 I), D = U (a_u Phi + a_xx / L^2 Phi_xixi);
+* PDE pseudo-observations: 0 ~ N(S Phi_xixixixi gamma + I_c Phi_tautau gamma / theta - f/q, s_f^2) (the
+  fit's residual theta S Phi_xixixixi beta + I_c Phi_tautau beta - f/q, unchanged);
+* boundary and initial pseudo-observations: 0 ~ N(B gamma, s_b^2), 0 ~ N(C gamma, s_i^2);
+* prior gamma ~ N(0, s_w^2 I).
 
-So p(y | theta, sigma) = integral over beta is Gaussian and exact: with A = D'D/sigma^2 + R'R/s_f^2 +
-B'B/s_b^2 + C'C/s_i^2 + I/s_w^2 and b = D'y/sigma^2 + R'f/s_f^2,
+Why gamma and not beta: the trained features cannot meet the boundary conditions exactly, so B beta is a
+systematic error proportional to the deflection's amplitude, and a stiffer beam deflects less. Stated
+for beta (0 ~ N(B beta, s_b^2), 1600 boundary rows) that term rewards every shrinking of the amplitude,
+i.e. a stiffer EI: on a 10 dB Exeter fit (EI 1.012e9) it fell as 1/theta^2 and put the marginal's peak at
++14 % (the B-PINN's runaway at 10 dB, 3 of 20 intervals holding the truth). For gamma it is the same at
+every EI; there the peak lies at +1.5 % (the modal posterior's mean: +2.7 %, sd 2.8 %) and the noise level
+stays right (5.00e-4 against the modal 5.25e-4). Weakening the boundary rows instead (s_b times 10) also
+removes the drift but frees 12-18 output directions to fit the noise (sigma 4.1e-4, 2.9 modal sds low).
+What is left at 10 dB: the first mode's free vibrations follow theta (their frequency), but their
+amplitudes are free output weights, so at that noise level a slightly different frequency can fit a bit
+of noise, and the posterior comes out too narrow (same 10 dB data: sd 0.54x the modal one, mean 0.44
+modal sd away). Holding that mode at the fitted EI as well gives 0.99x at 10 dB, but 1.54x at 20 dB, where
+the modal posterior does use the frequency: the choice here keeps the frequency.
+
+So p(y | theta, sigma) = integral over gamma is Gaussian and exact: with R = S Phi_xixixixi + I_c
+Phi_tautau / theta, A = D'D/(theta sigma)^2 + R'R/s_f^2 + B'B/s_b^2 + C'C/s_i^2 + I/s_w^2 and
+b = D'y/(theta sigma^2) + R'f/s_f^2,
 
     log p = -1/2 (y'y/sigma^2 + f'f/s_f^2) + 1/2 b'A^-1 b - 1/2 log|A| - P log sigma - (H+1) log s_w + c.
 
 The pseudo-observation scales s_f, s_b, s_i are stated, not tuned: the RMS residual of each term at the
-deterministic fit (what the network can actually achieve), floored at `MIN_PSEUDO_SD`, and for the PDE
+deterministic fit (what the network can actually achieve; for gamma_fit = theta_fit beta_fit), floored at `MIN_PSEUDO_SD`, and for the PDE
 times `PDE_SD_FACTOR`. The PDE rows are where theta enters, and the trained network's PDE residual is a
 smooth field, not independent noise: its 2000 values carry the information of a few dozen independent
 ones. Counted as 2000 independent observations they pull theta towards wherever the network's own
@@ -47,7 +66,7 @@ from ..pinn.taylor import Jet
 MIN_PSEUDO_SD = 1e-6
 #: the PDE pseudo-observations' sd is the fit's RMS residual times this (see the module docstring)
 PDE_SD_FACTOR = 10.0
-#: prior sd of the output weights, as a multiple of the largest fitted weight
+#: prior sd of the stiffness-scaled output weights gamma, as a multiple of the largest fitted one
 WEIGHT_PRIOR_FACTOR = 10.0
 
 
@@ -136,14 +155,16 @@ class LastLayer:
         self.xi_i = T(rng.uniform(0, 1, n_ic))
         ji = feature_jet(model, member, self.xi_i, torch.zeros_like(self.xi_i), 0, 1)
         Cm = torch.cat([ji.value, ji.dt(1)])
-        # the fitted output weights, and the residual scales they achieve (every column at the fitted EI)
+        # the fitted output weights, and the residual scales they achieve (every column at the fitted EI);
+        # the boundary, initial and prior scales are those of the stiffness-scaled weights gamma = theta beta
         beta_fit = model.head[0].detach().double()
         self.theta_fit = float(torch.exp(model.log_ei[member].detach().double()))
+        gamma_fit = self.theta_fit * beta_fit
         r_f = self.theta_fit * P4 @ beta_fit + P2 @ beta_fit - f
         self.s_f = max(float(r_f.pow(2).mean().sqrt()), MIN_PSEUDO_SD) * PDE_SD_FACTOR
-        self.s_b = max(float((Bm @ beta_fit).pow(2).mean().sqrt()), MIN_PSEUDO_SD)
-        self.s_i = max(float((Cm @ beta_fit).pow(2).mean().sqrt()), MIN_PSEUDO_SD)
-        self.s_w = WEIGHT_PRIOR_FACTOR * float(beta_fit.abs().max())
+        self.s_b = max(float((Bm @ gamma_fit).pow(2).mean().sqrt()), MIN_PSEUDO_SD)
+        self.s_i = max(float((Cm @ gamma_fit).pow(2).mean().sqrt()), MIN_PSEUDO_SD)
+        self.s_w = WEIGHT_PRIOR_FACTOR * float(gamma_fit.abs().max())
         self.beta_fit = beta_fit
         self.n = y.numel()
         self.k = D.shape[1]
@@ -186,22 +207,24 @@ class LastLayer:
         return Dv, Cv
 
     def _system(self, log_theta: torch.Tensor, log_sigma: torch.Tensor):
-        th = torch.exp(log_theta)
+        """Precision A and vector b of the stiffness-scaled weights gamma = theta beta given (theta, sigma)."""
+        it = torch.exp(-log_theta)
         inv_s2 = torch.exp(-2 * log_sigma)
-        A = self.G_dd * inv_s2 + th**2 * self.G44 + th * self.G42 + self.G22 + self.G_c
-        b = self.g_dy * inv_s2 + th * self.g4f + self.g2f
+        d2 = inv_s2 * it**2  # the data rows are D / theta
+        A = self.G_dd * d2 + self.G44 + it * self.G42 + it**2 * self.G22 + self.G_c
+        b = self.g_dy * (inv_s2 * it) + self.g4f + it * self.g2f
         if self.fv is not None:
             Dv, Cv = self._varying(log_theta)
             s_i2 = self.s_i**2
-            A_fv = self.Df.T @ Dv * inv_s2 + self.Cf.T @ Cv / s_i2
-            A_vv = Dv.T @ Dv * inv_s2 + Cv.T @ Cv / s_i2
-            b_v = Dv.T @ self.y * inv_s2
+            A_fv = self.Df.T @ Dv * d2 + self.Cf.T @ Cv / s_i2
+            A_vv = Dv.T @ Dv * d2 + Cv.T @ Cv / s_i2
+            b_v = Dv.T @ self.y * (inv_s2 * it)
             if self.pde_v is not None:  # damped free vibrations leave a PDE residual
                 xi_f, tau_f, P4f, P2f, f = self.pde_v
                 jf = self._fv_jet(xi_f, tau_f, 4, 2, log_theta)
-                Rv = th * self.pt.stiffness * jf.dx(4) + self.pt.inertia * jf.dt(2)
+                Rv = self.pt.stiffness * jf.dx(4) + it * self.pt.inertia * jf.dt(2)
                 s_f2 = self.s_f**2
-                A_fv = A_fv + (th * P4f + P2f).T @ Rv / s_f2
+                A_fv = A_fv + (P4f + it * P2f).T @ Rv / s_f2
                 A_vv = A_vv + Rv.T @ Rv / s_f2
                 b_v = b_v + Rv.T @ f / s_f2
             A = torch.cat([torch.cat([A, A_fv], 1), torch.cat([A_fv.T, A_vv], 1)], 0)
@@ -217,13 +240,14 @@ class LastLayer:
         return -0.5 * (self.yy * inv_s2 + self.ff) + 0.5 * (b @ z) - 0.5 * logdet - self.n * log_sigma
 
     def weights_posterior(self, log_theta: float, log_sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
-        """Mean (k,) and covariance (k, k) of the output weights given theta and sigma."""
+        """Mean (k,) and covariance (k, k) of the output weights beta = gamma / theta given theta and sigma."""
         with torch.no_grad():
             A, b, _ = self._system(torch.tensor(log_theta, dtype=torch.float64), torch.tensor(log_sigma, dtype=torch.float64))
             Lc = torch.linalg.cholesky(A)
             mean = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
             cov = torch.cholesky_inverse(Lc)
-        return mean, cov
+        it = math.exp(-log_theta)
+        return mean * it, cov * it**2
 
     def laplace_sd_log_theta(self, log_theta: float, log_sigma: float, prior_sd: float) -> float:
         """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's; nan when the
