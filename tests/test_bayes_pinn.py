@@ -48,7 +48,10 @@ def _brute_force(ll: LastLayer, D, P4, P2, f, Bm, Cm, y, lt, ls):
 def test_last_layer_marginal_is_exact(smoke_fit):
     cfg, data, problem, res = smoke_fit
     model = res.model()
-    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
+    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
+                   vary_first_mode=True)
+    held = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
+                     vary_first_mode=False)
     # rebuild the same design matrices through the public pieces of the module, the first mode's free
     # vibrations at each theta, the higher modes without PDE rows (`LastLayer` docstring)
     from bayespinn.pinn.losses import moving_load
@@ -76,6 +79,22 @@ def test_last_layer_marginal_is_exact(smoke_fit):
     f = moving_load(xi_f[None], tau_f[None], pt)[0]
     y = T(data.value)
 
+    def brute_held(lt, ls):
+        """every free-vibration mode at the fitted EI, none with PDE rows"""
+        j = feature_jet(model, 0, xi_d, tau_d, 2, 0)
+        jf = feature_jet(model, 0, xi_f, tau_f, 4, 2)
+        P4, P2 = pt.stiffness * jf.dx(4), pt.inertia * jf.dt(2)
+        k = P4.shape[1]
+        P4[:, k - fv.n_features :] = 0.0
+        P2[:, k - fv.n_features :] = 0.0
+        rows = []
+        for end in (0.0, 1.0):
+            jb = feature_jet(model, 0, torch.full_like(tb, end), tb, 2, 0)
+            rows += [jb.value, jb.dx(2)]
+        ji = feature_jet(model, 0, xi_i, torch.zeros_like(xi_i), 0, 1)
+        return _brute_force(held, sc.U * j.value, P4, P2, f, torch.cat(rows), torch.cat([ji.value, ji.dt(1)]), y,
+                            lt, ls)
+
     def brute(lt, ls):
         j = feature_jet(model, 0, xi_d, tau_d, 2, 0)
         D = sc.U * with_low(j, xi_d, tau_d, 2, 0, lt, lambda q: q.value)
@@ -101,6 +120,11 @@ def test_last_layer_marginal_is_exact(smoke_fit):
     # equal up to one additive constant
     d = np.array(ours) - np.array(got)
     assert np.ptp(d) < EXACT_TOL * max(1.0, abs(got[0]))
+    # the same with the first mode held at the fitted EI
+    ours_h = [float(held.log_marginal(torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64)))
+              for a, b in pts]
+    d_h = np.array(ours_h) - np.array([brute_held(a, b) for a, b in pts])
+    assert np.ptp(d_h) < EXACT_TOL * max(1.0, abs(got[0]))
     # negative control: the free vibrations held at the fitted EI give a different likelihood
     frozen = []
     for a, b in pts:
@@ -114,6 +138,21 @@ def test_last_layer_marginal_is_exact(smoke_fit):
         frozen.append(_brute_force(ll, sc.U * j.value, pt.stiffness * jf.dx(4), pt.inertia * jf.dt(2), f,
                                    torch.cat(rows), torch.cat([ji.value, ji.dt(1)]), y, a, b))
     assert np.ptp(np.array(ours) - np.array(frozen)) > 100 * EXACT_TOL * max(1.0, abs(got[0]))
+
+
+def test_first_mode_follows_ei_only_where_the_data_resolve_its_vibration(smoke_fit):
+    """The vibration test (`lastlayer` docstring): at 20 dB the smoke fit's first-mode vibration stands well
+    above the noise and its frequency follows EI; the same features explaining far noisier data (noise 30x)
+    hold it at the fitted EI. Both decisions come from z^2 against the chi^2 threshold."""
+    cfg, data, problem, res = smoke_fit
+    model = res.model()
+    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
+    assert ll.first_mode_varies and ll.vibration_z2 > ll.vibration_threshold and ll.nv > 0
+    sd = float(np.std(data.value - data.value_true))
+    noisy = data.with_values(data.value + 30 * sd * np.random.default_rng(5).standard_normal(len(data)))
+    hid = LastLayer(model, 0, problem, noisy, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
+    assert not hid.first_mode_varies and hid.vibration_z2 < hid.vibration_threshold and hid.nv == 0
+    assert hid.kf == hid.k
 
 
 class _Gauss:

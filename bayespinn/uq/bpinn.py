@@ -193,6 +193,8 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
     ident = identified(log_ei.ravel(), ei_prior)
     diag.update(converged=converged, chains=s.chains, warmup=s.warmup, samples=s.samples,
                 pseudo_sd={"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i}, fit_EI=float(res.EI),
+                first_mode={"follows_EI": ll.first_mode_varies, "vibration_z2": ll.vibration_z2,
+                            "threshold": ll.vibration_threshold},
                 fit_runtime_s=res.runtime_s, beta_factor=res.beta_factor)
     info = {"variant": VARIANT, "identified": ident}
     if not ident:

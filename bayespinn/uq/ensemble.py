@@ -327,6 +327,7 @@ def ensemble_posterior(
         "pooling": f"conjugate: Laplace variance with {lap_dof:g} dof + between-member variance with {M - 1} dof",
         "sigma_hat_rto": sigma_hat,
         "member_sigma_mode": [g.mode for g in grids],
+        "member_first_mode_follows_EI": [ll.first_mode_varies for ll in lls],
         "identified": ident,
     }
     if M == 1:
