@@ -28,7 +28,7 @@ The first mode's free vibrations follow theta (their frequency carries informati
 the data resolve them. The vibration's amplitude is not a free parameter of the model: the initial-
 condition rows hold it at the fit's, and where the noise hides the vibration that amplitude is mostly
 fitted noise (two 10 and 20 dB fits of the same girder and truck: 5.1 % and 3.6 % of the deflection, with
-opposite signs). Its frequency then sharpens the posterior spuriously (10 dB: sd 0.54x the modal one).
+opposite signs). Its frequency then sharpens the posterior spuriously (10 dB: NUTS sd 0.54x the modal one).
 So the fitted first-mode vibration at the data points, v, is tested against the noise: z^2 = |v|^2 /
 sigma^2 (sigma the marginal's noise mode at the fitted EI) against the chi^2 quantile of its number of
 coefficients at `VIBRATION_FALSE_ALARM`; below it the mode stays at the fitted EI like the others.
@@ -181,8 +181,7 @@ class LastLayer:
         self.k = D.shape[1]
         self.fit_rss = float(((D @ beta_fit - y) ** 2).sum())
         self.y, self.yy, self.f = y, float(y @ y), f
-        self._rows = (D, P4, P2, Bm, Cm, xi_f, tau_f)
-        self._gram()
+        self._gram(D, P4, P2, Bm, Cm, xi_f, tau_f)
         # does the first mode's frequency carry information here? (module docstring)
         self.vibration_z2, self.vibration_threshold, self.first_mode_varies = None, None, self.fv is not None
         if self.fv is not None:
@@ -200,14 +199,11 @@ class LastLayer:
                     P4, P2 = P4.clone(), P2.clone()
                     P4[:, self.kf :] = 0.0
                     P2[:, self.kf :] = 0.0
-                    self._rows = (D, P4, P2, Bm, Cm, xi_f, tau_f)
                 self.fv, self.nv = None, 0
-                self._gram()
-        self._rows = None  # only needed while building; keeps a member's last layer light to send between processes
+                self._gram(D, P4, P2, Bm, Cm, xi_f, tau_f)
 
-    def _gram(self):
-        """Gram matrices of the columns that stay fixed (all but the varying first mode's)."""
-        D, P4, P2, Bm, Cm, xi_f, tau_f = self._rows
+    def _gram(self, D, P4, P2, Bm, Cm, xi_f, tau_f):
+        """Gram matrices of the columns that stay fixed (all but the varying first mode's), from the design rows."""
         f, y = self.f, self.y
         self.kf = kf = self.k - self.nv
         Df, P4f, P2f, Cf = D[:, :kf], P4[:, :kf], P2[:, :kf], Cm[:, :kf]
