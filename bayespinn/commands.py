@@ -66,11 +66,14 @@ def cmd_coverage(args) -> int:
     method = parse_methods(args.method if args.method != "all" else "modal", single=True)[0]
     opts = _opts(args, snr)
     out = Path(args.out) if args.out else Path("reports") / "coverage" / f"{method}-{args.case}-snr{args.snr}-seed{args.seed}.json"
+    # finished replicates survive an interruption here; the same command resumes from them
+    partial = out.with_name(out.name + ".partial.jsonl")
     res = coverage_study(
         method, cfg, snr, replicates=args.replicates, level=args.level, seed=args.seed, truth=args.truth,
-        opts=replace(opts, executor=None), executor=opts.executor, progress=not args.quiet,
+        opts=replace(opts, executor=None), executor=opts.executor, progress=not args.quiet, checkpoint=partial,
     )
     atomic_write_text(out, json.dumps(jsonable(res), indent=2) + "\n")
+    partial.unlink(missing_ok=True)
     log.info(
         "%s coverage at %s dB: %d / %d = %.3f (95%% CI [%.3f, %.3f]), rank-uniformity p = %.3f, %.1f s -> %s",
         res["method"], args.snr, res["hits"], res["replicates"], res["coverage"], *res["coverage_ci95"],

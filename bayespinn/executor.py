@@ -100,18 +100,25 @@ class Executor:
         desc: str = "tasks",
         progress: bool = True,
         resources: dict | None = None,
+        on_result: Callable[[int, object], None] | None = None,
     ) -> list:
-        """[fn(t) for t in tasks], in parallel, in task order."""
+        """[fn(t) for t in tasks], in parallel, in task order.
+
+        on_result : called in this process as on_result(i, result) as soon as task i finishes (in completion
+            order), e.g. to checkpoint long studies
+        """
         tasks = list(tasks)
         fn = _OneThread(fn)
+        done = on_result or (lambda i, r: None)
         if self.kind == "ray":
-            return _ray_map(fn, tasks, self.address, resources or {"num_cpus": 1}, desc, progress)
+            return _ray_map(fn, tasks, self.address, resources or {"num_cpus": 1}, desc, progress, done)
         n = min(self.workers or cpu_count(), len(tasks)) if tasks else 1
         bar = _bar(len(tasks), desc, progress)
         if n <= 1:
             out = []
-            for t in tasks:
+            for i, t in enumerate(tasks):
                 out.append(fn(t))
+                done(i, out[-1])
                 bar.update(1)
             bar.close()
             return out
@@ -121,6 +128,7 @@ class Executor:
             try:
                 for f in as_completed(futs):
                     results[futs[f]] = f.result()
+                    done(futs[f], results[futs[f]])
                     bar.update(1)
             except BaseException:
                 for f in futs:
@@ -137,7 +145,8 @@ def _bar(total: int, desc: str, progress: bool):
     return tqdm(total=total, desc=desc, unit="task", disable=not progress, leave=False)
 
 
-def _ray_map(fn: Callable, tasks: list, address: str | None, resources: dict, desc: str, progress: bool) -> list:
+def _ray_map(fn: Callable, tasks: list, address: str | None, resources: dict, desc: str, progress: bool,
+             on_result: Callable[[int, object], None]) -> list:
     try:
         import ray
     except ImportError:
@@ -154,10 +163,13 @@ def _ray_map(fn: Callable, tasks: list, address: str | None, resources: dict, de
         return fn(t)
 
     refs = [_call.remote(t) for t in tasks]
+    index = {r: i for i, r in enumerate(refs)}
     bar = _bar(len(refs), desc, progress)
     pending = list(refs)
     while pending:
         done, pending = ray.wait(pending, num_returns=1)
+        for r in done:
+            on_result(index[r], ray.get(r))
         bar.update(len(done))
     bar.close()
     return ray.get(refs)

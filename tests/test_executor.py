@@ -56,6 +56,40 @@ def test_local_results_do_not_depend_on_workers():
     assert _strip(one) == _strip(two)
 
 
+def test_coverage_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    """An interrupted study keeps its finished replicates; the same study started again runs only the rest
+    and gives the records an uninterrupted one gives. A different study does not reuse them."""
+    import bayespinn.uq.coverage as cov
+
+    ck = tmp_path / "c.partial.jsonl"
+    full = _study(Executor("local", workers=1))
+    calls = []
+    real = cov.run_replicate
+
+    def failing(task):
+        calls.append(task.index)
+        if task.index == 2:
+            raise KeyboardInterrupt  # the user stops the study during replicate 2
+        return real(task)
+
+    monkeypatch.setattr(cov, "run_replicate", failing)
+    with pytest.raises(KeyboardInterrupt):
+        coverage_study("modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, progress=False,
+                       executor=Executor("local", workers=1), checkpoint=ck)
+    assert len(ck.read_text().splitlines()) == 3  # header + replicates 0 and 1
+    monkeypatch.setattr(cov, "run_replicate", lambda t: (calls.append(t.index), real(t))[1])
+    calls.clear()
+    res = coverage_study("modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, progress=False,
+                         executor=Executor("local", workers=1), checkpoint=ck)
+    assert calls == [2, 3] and res["resumed_replicates"] == 2
+    assert _strip(res) == _strip(full)
+    # another seed is another study: nothing is reused
+    calls.clear()
+    other = coverage_study("modal", preset(), 10.0, replicates=2, seed=4, opts=SMALL, progress=False,
+                           executor=Executor("local", workers=1), checkpoint=ck)
+    assert calls == [0, 1] and other["resumed_replicates"] == 0
+
+
 def _ensemble(executor, seed=3):
     import numpy as np
 

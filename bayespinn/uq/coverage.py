@@ -9,8 +9,13 @@ depend on the executor or the number of workers.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
+import json
+import logging
+import os
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy import stats
@@ -20,6 +25,8 @@ from ..config import Config
 from ..data.synthetic import simulate
 from ..executor import Executor, task_resources
 from .methods import KEYS, RunOptions, infer
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -77,6 +84,57 @@ def binomial_acceptance(n: int, level: float, false_failure: float = 0.01) -> tu
     return lo, hi
 
 
+def fingerprint(method: str, cfg: Config, snr_db, seed: int, level: float, truth: str, opts: RunOptions) -> str:
+    """What decides a replicate's result: method, configuration, noise level, seed, level, truth and the
+    method's options (not the executor, the worker count or the number of replicates)."""
+    from .posterior import jsonable
+
+    spec = {
+        "method": method, "cfg": jsonable(dataclasses.asdict(cfg)), "snr_db": snr_db, "seed": seed, "level": level,
+        "truth": truth, "profile": opts.profile, "members": opts.members, "device": opts.device,
+        "noise_prior": opts.noise_prior, "mcmc": repr(opts.mcmc),
+    }
+    return hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode()).hexdigest()[:16]
+
+
+class Checkpoint:
+    """Finished replicates of one study, one JSON line each after a header line with the study's fingerprint,
+    appended and flushed as each replicate ends, so an interrupted study resumes where it stopped."""
+
+    def __init__(self, path: str | Path, key: str):
+        self.path, self.key = Path(path), key
+        self.done: dict[int, dict] = {}
+        if self.path.exists():
+            lines = self.path.read_text(encoding="utf-8").splitlines()
+            head = json.loads(lines[0]) if lines else {}
+            if head.get("fingerprint") == key:
+                for ln in lines[1:]:
+                    try:
+                        rec = json.loads(ln)
+                    except json.JSONDecodeError:  # a line cut short by a crash
+                        continue
+                    self.done[int(rec["index"])] = rec
+                log.info("resuming from %s: %d replicates already done", self.path, len(self.done))
+            else:
+                log.warning("%s belongs to a different study; starting afresh", self.path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with self.path.open("w", encoding="utf-8") as fh:  # rewrite: drops torn lines
+            fh.write(json.dumps({"fingerprint": key}) + "\n")
+            for rec in self.done.values():
+                fh.write(json.dumps(rec) + "\n")
+
+    def add(self, rec: dict) -> None:
+        from .posterior import jsonable
+
+        with self.path.open("a", encoding="utf-8") as fh:
+            fh.write(json.dumps(jsonable(rec)) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+
+    def remove(self) -> None:
+        self.path.unlink(missing_ok=True)
+
+
 def coverage_study(
     method: str,
     cfg: Config,
@@ -89,8 +147,13 @@ def coverage_study(
     opts: RunOptions | None = None,
     executor: Executor | None = None,
     progress: bool = True,
+    checkpoint: str | Path | None = None,
 ) -> dict:
-    """Run the study; returns the contract's coverage JSON (plus per-replicate records)."""
+    """Run the study; returns the contract's coverage JSON (plus per-replicate records).
+
+    checkpoint : a file that keeps every finished replicate; a study started again with the same settings
+        reuses them and runs only the rest (the caller removes it once the result is written)
+    """
     t0 = time.perf_counter()
     # the replicates are the parallel tasks: inside one, an ensemble's members train one after another in
     # that worker (same results as any other executor; no pool nested in a pool)
@@ -100,9 +163,13 @@ def coverage_study(
         from .sampler import MCMCSettings
 
         opts = dataclasses.replace(opts, mcmc=MCMCSettings.for_coverage())
-    tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in range(replicates)]
-    recs = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress,
-                                        resources=task_resources(opts.device if method != "modal" else "cpu"))
+    ck = Checkpoint(checkpoint, fingerprint(method, cfg, snr_db, seed, level, truth, opts)) if checkpoint else None
+    have = ck.done if ck else {}
+    tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in range(replicates) if i not in have]
+    new = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress,
+                                       resources=task_resources(opts.device if method != "modal" else "cpu"),
+                                       on_result=(lambda i, r: ck.add(r)) if ck else None)
+    recs = sorted([have[i] for i in range(replicates) if i in have] + new, key=lambda r: r["index"])
     hits = int(sum(r["hit"] for r in recs))
     ranks = np.array([r["rank"] for r in recs])
     p = float(stats.kstest(ranks, "uniform").pvalue) if replicates > 1 else float("nan")
@@ -124,5 +191,6 @@ def coverage_study(
         "truth": truth,
         "acceptance_99": list(binomial_acceptance(replicates, level)),
         "converged_fraction": float(np.mean([r["converged"] for r in recs])),
+        "resumed_replicates": sum(1 for i in range(replicates) if i in have),
         "records": recs,
     }
