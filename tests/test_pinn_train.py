@@ -72,6 +72,16 @@ def test_divergence_guard_names_the_step(problem):
     assert exc.value.step == 13
 
 
+def test_lbfgs_line_search_backs_off_from_a_non_finite_trial_step():
+    """This smoke fit's L-BFGS tries a step where the loss is NaN; torch's strong-Wolfe line search then
+    crashed with an IndexError. It must back off and finish with a finite EI."""
+    from bayespinn.data.synthetic import simulate
+
+    cfg = preset()
+    res = fit(Problem.from_config(cfg, simulate(cfg, 20.0, 1)), TrainSettings.for_profile("smoke"), seed=0, quiet=True)
+    assert math.isfinite(res.EI) and res.EI > 0
+
+
 def test_runaway_ei_is_divergence(problem):
     s = dataclasses.replace(SMOKE, optimizer="adam", max_log_ei=1e-3)
     with pytest.raises(TrainingDiverged, match=r"at step \d+"):

@@ -311,12 +311,19 @@ class _Trainer:
             g["max_iter"] = n
             g["max_eval"] = int(n * 1.25)
 
+        last = {"f": None}
+
         def closure():
             self.lbfgs.zero_grad(set_to_none=True)
             total, per, terms = self.loss(self.col)
             if bool(torch.isfinite(total)):
                 total.backward()
-            return total
+                last["f"] = float(total.detach())
+                return total
+            # a trial step the loss cannot be evaluated at: report a much larger finite loss so the strong-Wolfe
+            # line search backs off (a NaN there ends in an IndexError inside torch, an inf in a NaN step)
+            f0 = last["f"] if last["f"] is not None else 1.0
+            return torch.tensor(abs(f0) * 1e6 + 1e6, dtype=total.dtype, device=total.device)
 
         self.lbfgs.step(closure)
         total, per, terms = self.loss(self.col)  # (with grad: no_grad would make torch.compile recompile)
