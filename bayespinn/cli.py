@@ -75,6 +75,9 @@ def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True
     p.add_argument("--address", default=None, help="Ray cluster address (with --executor ray), or 'auto'")
     p.add_argument("--workers", type=_int("--workers", 1), default=None, help="local worker processes")
     p.add_argument("--noise-prior", dest="noise_prior", default="vague", help="vague or snr")
+    p.add_argument("--bpinn-variant", dest="bpinn_variant", default="auto",
+                   help="B-PINN sampler: last-layer, full (every hidden weight), or auto (default: full for "
+                        "--profile paper and on a GPU, else last-layer)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
@@ -130,6 +133,8 @@ def _config(args) -> Config:
         raise InputError("--case", args.case, "deflection or strain")
     if getattr(args, "profile", "fast") not in ("smoke", "fast", "paper"):
         raise InputError("--profile", args.profile, "smoke, fast or paper")
+    if getattr(args, "bpinn_variant", "auto") not in ("auto", "last-layer", "full"):
+        raise InputError("--bpinn-variant", args.bpinn_variant, "auto, last-layer or full")
     if getattr(args, "noise_prior", "vague") not in ("vague", "snr"):
         raise InputError("--noise-prior", args.noise_prior, "vague or snr")
     if getattr(args, "executor", "local") not in ("local", "ray"):

@@ -23,6 +23,7 @@ def _opts(args, snr_db) -> RunOptions:
         members=args.members,
         device=resolve_device(args.device),
         noise_prior=args.noise_prior,
+        bpinn_variant=args.bpinn_variant,
         snr_db=snr_db,
         progress=not args.quiet,
         executor=Executor(args.executor, args.workers, args.address),

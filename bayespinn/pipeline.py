@@ -162,7 +162,8 @@ def run(
         "data": str(data_path) if data_path else "synthetic (finite-element reference, point loads)",
         "methods": list(posts),
         "options": {
-            "profile": opts.profile, "members": opts.members, "noise_prior": opts.noise_prior, "device": opts.device
+            "profile": opts.profile, "members": opts.members, "noise_prior": opts.noise_prior, "device": opts.device,
+            "bpinn_variant": opts.bpinn_variant,
         },
         "device": opts.device,
         "versions": versions(),

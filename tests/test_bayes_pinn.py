@@ -155,6 +155,80 @@ def test_first_mode_follows_ei_only_where_the_data_resolve_its_vibration(smoke_f
     assert hid.kf == hid.k
 
 
+def test_full_weight_model_is_the_last_layer_one_with_free_hidden_weights(smoke_fit):
+    """`bpinn_full`: at the fitted hidden weights its log marginal is the last-layer model's (bit for bit), at
+    other hidden weights it is that of a network carrying them (the flat vector maps onto the right weights),
+    and it is differentiable in every hidden weight."""
+    from bayespinn.uq.bpinn_full import FullWeight
+    from bayespinn.uq.lastlayer import feature_jet
+
+    cfg, data, problem, res = smoke_fit
+    model = res.model()
+    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
+                   vary_first_mode=False)
+    fw = FullWeight(ll, model.member(0))
+    n_hidden = sum(w.numel() + b.numel() for w, b in zip(list(model.weights)[:-1], list(model.biases)[:-1], strict=True))
+    assert fw.dim == n_hidden
+    z = [(math.log(ll.theta_fit), -8.0), (0.1, -7.5)]
+    T = lambda v: torch.tensor(v, dtype=torch.float64)  # noqa: E731
+    for lt, ls in z:
+        assert float(fw.log_marginal(fw.h_fit, T(lt), T(ls))) == float(ll.log_marginal(T(lt), T(ls)))
+    h = fw.h_fit + 0.01 * torch.randn(fw.dim, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+    net = model.member(0).double()
+    with torch.no_grad():
+        flat = iter(torch.split(h, [p.numel() for p in list(net.weights)[:-1] + list(net.biases)[:-1]]))
+        for p in list(net.weights)[:-1]:
+            p.copy_(next(flat).view(p.shape))
+        for p in list(net.biases)[:-1]:
+            p.copy_(next(flat).view(p.shape))
+    ref = ll.with_rows(*ll.rows(lambda xi, tau, kx, kt: feature_jet(net, 0, xi, tau, kx, kt)))
+    got = float(fw.log_marginal(h, T(0.05), T(-7.8)))
+    assert abs(got - float(ref.log_marginal(T(0.05), T(-7.8)))) < EXACT_TOL * abs(got)
+    # negative control: the hidden weights matter far beyond that tolerance
+    assert abs(got - float(fw.log_marginal(fw.h_fit, T(0.05), T(-7.8)))) > 100 * EXACT_TOL * abs(got)
+    hh = h.clone().requires_grad_(True)
+    fw.log_marginal(hh, T(0.05), T(-7.8)).backward()
+    assert torch.isfinite(hh.grad).all() and (hh.grad != 0).float().mean() > 0.9
+
+
+@pytest.mark.slow
+def test_full_weight_nuts_reduces_to_the_last_layer_posterior(smoke_fit):
+    """The full-weight sampler end to end (whitening, chains, draws of log EI) with the hidden weights' prior
+    held tightly at the fit: its posterior of (log theta, log sigma) must be the last-layer one; a reference
+    off by a factor 2 in the sd of log theta must fail the same check."""
+    from bayespinn.uq.bpinn import _laplace_factor, _map, _Potential
+    from bayespinn.uq.bpinn_full import FullHMCSettings, FullWeight, _FullPotential, full_nuts
+    from bayespinn.uq.priors import EIPrior, NoisePrior
+
+    cfg, data, problem, res = smoke_fit
+    ll = LastLayer(res.model(), 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
+                   vary_first_mode=False)
+    pot = _Potential(ll, EIPrior.from_spec(cfg.prior), NoisePrior.build("vague", data.value, None), 0.0)
+    z_map = _map(pot, np.array([math.log(ll.theta_fit), math.log(math.sqrt(ll.fit_rss / ll.n))]))
+    L = _laplace_factor(pot, z_map)
+    ref = nuts(pot, z_map, L, NUTSSettings(4, 200, 500), seed=0, progress=False).reshape(-1, 2)
+    mean, sd = ref.mean(0), ref.std(0)
+    fw = FullWeight(ll, res.model().member(0))
+    held = _FullPotential(fw, pot, z_map, L, prior_mean=fw.h_fit, prior_sd=1e-6)
+    z, h, hz, div = full_nuts(held, FullHMCSettings(4, 150, 300, 5), seed=1, progress=False)
+    assert z.shape == (4, 300, 2) and h.shape[1] == fw.dim and len(hz) == len(h)
+    assert float((h - fw.h_fit).abs().max()) < 1e-4
+    assert _ok(z, mean, sd)
+    assert not _ok(z, mean, [2 * sd[0], sd[1]])
+
+
+def test_bpinn_variant_choice():
+    from bayespinn.uq.bpinn import resolve_variant
+
+    assert resolve_variant("auto", "fast", "cpu") == "last-layer"
+    assert resolve_variant("auto", "paper", "cpu") == "full"
+    assert resolve_variant("auto", "fast", "cuda") == "full"
+    assert resolve_variant("last-layer", "paper", "cuda") == "last-layer"
+    assert resolve_variant("full", "smoke", "cpu") == "full"
+    with pytest.raises(ValueError, match="variant"):
+        resolve_variant("fulll", "fast", "cpu")
+
+
 class _Gauss:
     def __init__(self, mean, sd):
         self.mean, self.sd = torch.tensor(mean, dtype=torch.float64), torch.tensor(sd, dtype=torch.float64)
@@ -182,23 +256,30 @@ def test_nuts_recovers_gaussian_and_negative_control():
     assert not _ok(wrong, mean, sd)
 
 
-@pytest.mark.parametrize("method", ["bpinn", "ensemble"])
+@pytest.mark.parametrize("method", ["bpinn", "bpinn-full", "ensemble"])
 def test_methods_end_to_end_smoke(method):
+    from bayespinn.uq.bpinn import VARIANT
+    from bayespinn.uq.bpinn_full import FULL_VARIANT
+
     cfg = preset()
     data = simulate(cfg, 20.0, 2)
-    p = infer(method, data, cfg, 2, RunOptions(profile="smoke", members=3, snr_db=20.0))
+    method, _, full = method.partition("-")
+    opts = RunOptions(profile="smoke", members=3, snr_db=20.0, bpinn_variant="full" if full else "auto")
+    p = infer(method, data, cfg, 2, opts)
     s = p.summary({"EI": cfg.beam.EI})
     assert np.isfinite(s["EI"]["mean"]) and s["EI"]["ci90"][0] < s["EI"]["ci90"][1]
     assert np.isfinite(s["sigma"]["mean"]) and s["sigma"]["mean"] > 0
     if method == "ensemble":
         assert s["members"] == 3 and len(s["member_EI"]) == 3
     else:
-        assert s["diagnostics"]["chains"] >= 4 and "variant" in s
+        assert s["diagnostics"]["chains"] >= 4 and s["variant"] == (FULL_VARIANT if full else VARIANT)
     band = p.predictor(np.array([4.0, 8.0]), np.array([0.8, 1.2]), "deflection", 12)
     assert band.shape[1] == 2 and np.all(np.isfinite(band))
-    # the same seed gives the same numbers
-    q = infer(method, data, cfg, 2, RunOptions(profile="smoke", members=3, snr_db=20.0))
-    np.testing.assert_allclose(q.EI, p.EI)
+    moment = p.predictor(np.array([4.0, 8.0]), np.array([0.8, 1.2]), "moment", 12)
+    assert moment.shape == band.shape and np.all(np.isfinite(moment))
+    if not full:  # the same seed gives the same numbers
+        q = infer(method, data, cfg, 2, opts)
+        np.testing.assert_allclose(q.EI, p.EI)
 
 
 def test_ensemble_without_data_is_not_identified():

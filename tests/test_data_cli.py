@@ -141,7 +141,8 @@ def test_cli_simulate_and_bad_input(tmp_path):
     bad_toml = tmp_path / "bad.toml"
     bad_toml.write_text("[beam]\nlength = -1\n")
     for args in (["--snr", "nan"], ["--snr", "inf"], ["--snr", "abc"], ["--snr=-5"], ["--snr", "10", "--config", str(bad_toml)],
-                 ["--snr", "10", "--case", "tilt"], ["--snr", "10", "--device", "tpu"]):
+                 ["--snr", "10", "--case", "tilt"], ["--snr", "10", "--device", "tpu"],
+                 ["--snr", "10", "--bpinn-variant", "fulll"]):
         out = tmp_path / "b.csv"
         r = _cli("simulate", *args, "--out", str(out))
         assert r.returncode == 2, (args, r.stderr)

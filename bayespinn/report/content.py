@@ -321,7 +321,7 @@ def diagnostics_section(summary: dict) -> list[Block]:
                 _other_diag(d),
             )
         )
-    return [
+    out: list[Block] = [
         Heading("Diagnostics"),
         table(
             ("method", "R-hat", "bulk ESS", "tail ESS", "converged", "other"),
@@ -329,6 +329,10 @@ def diagnostics_section(summary: dict) -> list[Block]:
             "R-hat and ESS from ArviZ (rank-normalised split R-hat); n/a where a method has none.",
         ),
     ]
+    for key, m in summary["methods"].items():
+        if m.get("variant"):
+            out.append(Paragraph(f"{name(key)} variant: {m['variant']}."))
+    return out
 
 
 def runtime_section(result) -> list[Block]:

@@ -93,6 +93,7 @@ def fingerprint(method: str, cfg: Config, snr_db, seed: int, level: float, truth
         "method": method, "cfg": jsonable(dataclasses.asdict(cfg)), "snr_db": snr_db, "seed": seed, "level": level,
         "truth": truth, "profile": opts.profile, "members": opts.members, "device": opts.device,
         "noise_prior": opts.noise_prior, "mcmc": repr(opts.mcmc),
+        "bpinn_variant": opts.bpinn_variant,
     }
     return hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode()).hexdigest()[:16]
 

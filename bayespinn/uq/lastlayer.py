@@ -57,6 +57,7 @@ differentiable for NUTS).
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -144,28 +145,18 @@ class LastLayer:
         self.a_u, self.a_xx = T(a_u), T(a_xx)
         self.xi_d, self.tau_d = T(data.x / sc.L), T(data.t / sc.T)
         self.kx_d = 2 if np.any(a_xx != 0) else 0
-        j = feature_jet(model, member, self.xi_d, self.tau_d, 2, 0)
-        D = self._design(j.value, j.dx(2))
         y = T(data.value)
-        # PDE pseudo-observations (non-dimensional residual, as in training but unscaled by beta)
-        xi_f, tau_f = T(rng.uniform(0, 1, n_pde)), T(rng.uniform(0, 1, n_pde))
-        jf = feature_jet(model, member, xi_f, tau_f, 4, 2)
-        P4 = pt.stiffness * jf.dx(4)
-        P2 = pt.inertia * jf.dt(2)
-        if quiet_pde is not None:
-            P4[:, quiet_pde] = 0.0
-            P2[:, quiet_pde] = 0.0
-        f = moving_load(xi_f.unsqueeze(0), tau_f.unsqueeze(0), pt, images)[0]
-        # boundary (u = u_xx = 0 at both ends) and initial (u = u_t = 0) pseudo-observations
-        tb = T(rng.uniform(0, 1, n_bc))
-        rows_b = []
-        for end in (0.0, 1.0):
-            jb = feature_jet(model, member, torch.full_like(tb, end), tb, 2, 0)
-            rows_b += [jb.value, jb.dx(2)]
-        Bm = torch.cat(rows_b)
+        # pseudo-observation points: PDE (non-dimensional residual, as in training but unscaled by beta),
+        # boundary (u = u_xx = 0 at both ends) and initial (u = u_t = 0); drawn in this order from rng
+        self.xi_f, self.tau_f = T(rng.uniform(0, 1, n_pde)), T(rng.uniform(0, 1, n_pde))
+        self.tb = T(rng.uniform(0, 1, n_bc))
         self.xi_i = T(rng.uniform(0, 1, n_ic))
-        ji = feature_jet(model, member, self.xi_i, torch.zeros_like(self.xi_i), 0, 1)
-        Cm = torch.cat([ji.value, ji.dt(1)])
+        self.f = f = moving_load(self.xi_f.unsqueeze(0), self.tau_f.unsqueeze(0), pt, images)[0]
+        # columns without PDE rows (exact homogeneous solutions): the quiet higher modes
+        self.pde_mask = torch.ones(model.head.shape[1], dtype=torch.float64)
+        if quiet_pde is not None:
+            self.pde_mask[quiet_pde] = 0.0
+        D, P4, P2, Bm, Cm = self.rows(lambda xi, tau, kx, kt: feature_jet(model, member, xi, tau, kx, kt))
         # the fitted output weights, and the residual scales they achieve (every column at the fitted EI);
         # the boundary, initial and prior scales are those of the stiffness-scaled weights gamma = theta beta
         beta_fit = model.head[0].detach().double()
@@ -180,8 +171,8 @@ class LastLayer:
         self.n = y.numel()
         self.k = D.shape[1]
         self.fit_rss = float(((D @ beta_fit - y) ** 2).sum())
-        self.y, self.yy, self.f = y, float(y @ y), f
-        self._gram(D, P4, P2, Bm, Cm, xi_f, tau_f)
+        self.y, self.yy = y, float(y @ y)
+        self._gram(D, P4, P2, Bm, Cm)
         # does the first mode's frequency carry information here? (module docstring)
         self.vibration_z2, self.vibration_threshold, self.first_mode_varies = None, None, self.fv is not None
         if self.fv is not None:
@@ -196,13 +187,37 @@ class LastLayer:
             if not vary_first_mode:
                 self.first_mode_varies = False
                 if fv_all.pde_exact:  # now an exact homogeneous solution at the fitted EI, like the others
-                    P4, P2 = P4.clone(), P2.clone()
-                    P4[:, self.kf :] = 0.0
-                    P2[:, self.kf :] = 0.0
+                    self.pde_mask[self.kf :] = 0.0
+                    P4, P2 = P4 * self.pde_mask, P2 * self.pde_mask
                 self.fv, self.nv = None, 0
-                self._gram(D, P4, P2, Bm, Cm, xi_f, tau_f)
+                self._gram(D, P4, P2, Bm, Cm)
 
-    def _gram(self, D, P4, P2, Bm, Cm, xi_f, tau_f):
+    def rows(self, jet) -> tuple[torch.Tensor, ...]:
+        """The design rows (D, P4, P2, B, C) of the basis given by ``jet(xi, tau, kx, kt) -> Jet (N, k)`` at this
+        model's data and pseudo-observation points (differentiable in whatever ``jet`` depends on)."""
+        pt = self.pt
+        j = jet(self.xi_d, self.tau_d, 2, 0)
+        D = self._design(j.value, j.dx(2))
+        jf = jet(self.xi_f, self.tau_f, 4, 2)
+        P4 = pt.stiffness * jf.dx(4) * self.pde_mask
+        P2 = pt.inertia * jf.dt(2) * self.pde_mask
+        rows_b = []
+        for end in (0.0, 1.0):
+            jb = jet(torch.full_like(self.tb, end), self.tb, 2, 0)
+            rows_b += [jb.value, jb.dx(2)]
+        ji = jet(self.xi_i, torch.zeros_like(self.xi_i), 0, 1)
+        return D, P4, P2, torch.cat(rows_b), torch.cat([ji.value, ji.dt(1)])
+
+    def with_rows(self, D, P4, P2, Bm, Cm) -> LastLayer:
+        """The same model (points, scales, priors, first-mode choice) for other design rows, e.g. those of the
+        network at other hidden weights (`bpinn_full`). Only for a model whose first mode is held."""
+        if self.fv is not None:
+            raise ValueError("with_rows needs a last-layer model whose first mode is held (vary_first_mode=False)")
+        view = copy.copy(self)
+        view._gram(D, P4, P2, Bm, Cm)
+        return view
+
+    def _gram(self, D, P4, P2, Bm, Cm):
         """Gram matrices of the columns that stay fixed (all but the varying first mode's), from the design rows."""
         f, y = self.f, self.y
         self.kf = kf = self.k - self.nv
@@ -216,10 +231,10 @@ class LastLayer:
         self.ff = float(f @ f) / self.s_f**2
         Bf = Bm[:, :kf]  # the free vibrations vanish at the supports (u and u_xx)
         self.G_c = Bf.T @ Bf / self.s_b**2 + Cf.T @ Cf / self.s_i**2
-        self.eye = torch.eye(self.k, dtype=torch.float64) / self.s_w**2
+        self.eye = torch.eye(self.k, dtype=torch.float64, device=D.device) / self.s_w**2
         self.pde_v = None
         if self.fv is not None and not self.fv.pde_exact:
-            self.pde_v = (xi_f, tau_f, P4f, P2f, f)
+            self.pde_v = (self.xi_f, self.tau_f, P4f, P2f, f)
 
     def noise_mode(self, log_theta: float) -> float:
         """The noise level sigma that maximises the marginal likelihood at theta = exp(log_theta)."""

@@ -29,6 +29,7 @@ class RunOptions:
     progress: bool = False
     executor: object = None  # bayespinn.executor.Executor for ensemble members
     mcmc: object = None  # bayespinn.uq.sampler.MCMCSettings overriding the profile's
+    bpinn_variant: str = "auto"  # last-layer, full, or auto (`bpinn.resolve_variant`)
 
 
 def noise_prior(data: Measurements, opts: RunOptions) -> NoisePrior:
