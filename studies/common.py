@@ -62,6 +62,13 @@ def parser(description: str) -> argparse.ArgumentParser:
         choices=("vague", "snr"),
         help="prior on the noise sd (default vague)",
     )
+    p.add_argument(
+        "--bpinn-variant",
+        dest="bpinn_variant",
+        default="auto",
+        choices=("auto", "last-layer", "full"),
+        help="B-PINN sampler (default auto: full for --profile paper and on a GPU, else last-layer)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress output")
     return p
 
@@ -82,6 +89,7 @@ def run_options(args, snr_db: float | None = None) -> RunOptions:
         members=args.members,
         device=resolve_device(args.device),
         noise_prior=args.noise_prior,
+        bpinn_variant=getattr(args, "bpinn_variant", "auto"),
         snr_db=snr_db,
         progress=not args.quiet,
     )

@@ -96,7 +96,9 @@ def blocks(doc: dict) -> list:
                 fmt_pct(r["mean_rel_error_pct"]),
                 f"{r['mean_sd_rel_pct']:.3f} %",
                 "n/a" if conv is None else f"{100 * conv:.0f} %",
-                f"{r['runtime_s']:.0f}",
+                f"{r['runtime_s']:.0f}"
+                + (f" (+{r['resumed_replicates']} replicates resumed from an earlier run)"
+                   if r.get("resumed_replicates") else ""),
                 c.run_label(doc["runs"], r["run"]),
             )
         )
@@ -203,6 +205,8 @@ def main(argv: list[str] | None = None) -> int:
     for m, key in zip(methods, keys, strict=True):
         for snr in levels:
             log.info("coverage: %s at %s dB, %d replicates", key, snr_label(snr), reps[m])
+            # finished replicates survive an interruption; the same command resumes from them
+            partial = out / "coverage" / f"{key}-snr{snr_label(snr)}.json.partial.jsonl"
             res = coverage_study(
                 m,
                 cfg,
@@ -213,8 +217,10 @@ def main(argv: list[str] | None = None) -> int:
                 opts=replace(c.run_options(args, snr), progress=False),
                 executor=executor,
                 progress=not args.quiet,
+                checkpoint=partial,
             )
             c.write_json(out / "coverage" / f"{key}-snr{snr_label(snr)}.json", res)
+            partial.unlink(missing_ok=True)
             row = {k: v for k, v in res.items() if k != "records"}
             row["acceptance_99"] = list(
                 binomial_acceptance(res["replicates"], args.level, FALSE_FAILURE)
