@@ -212,7 +212,7 @@ def provenance_lines(runs: dict, used: Iterable[str]) -> list[str]:
 
 
 #: study-specific provenance entries shown after the common ones
-EXTRAS = ("levels", "snr_db", "gauge", "sample_rate", "replicates", "workers")
+EXTRAS = ("levels", "snr_db", "gauge", "sample_rate", "replicates", "workers", "note")
 
 
 def _show(v) -> str:
