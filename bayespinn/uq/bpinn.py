@@ -194,7 +194,9 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
     if variant == "full":
         from .bpinn_full import FULL_VARIANT, sample_full
 
-        draws, diag, pred = sample_full(res, problem, data, seed, opts, noise, settings, _Potential, ei_prior, shift)
+        with torch_threads(1):  # the last-layer MAP it starts from: tiny linear algebra
+            start = last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=False)
+        draws, diag, pred = sample_full(start, seed, opts, shift)
         name = FULL_VARIANT
     else:
         with torch_threads(1):  # tiny linear algebra (see `threads`)
@@ -226,16 +228,22 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
                      predictor=pred)
 
 
-def _sample_last_layer(res, problem, data, seed, opts, noise, settings, ei_prior, shift):
-    """NUTS on (log theta, log sigma) of the last-layer model: z draws (chain, draw, 2), diagnostics, predictor."""
+def last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=None):
+    """The fit's last-layer model, its potential in (log theta, log sigma), the MAP there and the Laplace
+    factor: (model, LastLayer, potential, z_map, L)."""
     model = res.model("cpu")
     rng = np.random.default_rng(seeding.stream(seed, "collocation"))
     ll = LastLayer(model, 0, problem, data, rng, n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
-                   beta_rel=settings.beta_rel, images=settings.images)
+                   beta_rel=settings.beta_rel, images=settings.images, vary_first_mode=vary_first_mode)
     pot = _Potential(ll, ei_prior, noise, shift)
     sigma0 = max(math.sqrt(ll.fit_rss / max(ll.n, 1)), noise.low * 10)
     z_map = _map(pot, np.array([math.log(ll.theta_fit), math.log(sigma0)]))
-    L = _laplace_factor(pot, z_map)
+    return model, ll, pot, z_map, _laplace_factor(pot, z_map)
+
+
+def _sample_last_layer(res, problem, data, seed, opts, noise, settings, ei_prior, shift):
+    """NUTS on (log theta, log sigma) of the last-layer model: z draws (chain, draw, 2), diagnostics, predictor."""
+    _, ll, pot, z_map, L = last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift)
     log.info("[bpinn] NUTS: %s", VARIANT)
     s = NUTSSettings.for_profile(opts.profile)
     draws = nuts(pot, z_map, L, s, seed, opts.progress)

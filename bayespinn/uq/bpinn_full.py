@@ -215,18 +215,10 @@ def full_nuts(pot: _FullPotential, s: FullHMCSettings, seed, progress: bool):
     return np.stack(zs), torch.cat(hs), np.concatenate(hz), div
 
 
-def sample_full(res, problem, data, seed, opts, noise, settings, z_pot_cls, ei_prior, shift):
-    """The full-weight variant of `bpinn._sample`: z draws (chain, draw, 2), diagnostics, predictor."""
-    from .bpinn import _laplace_factor, _map
-
-    model = res.model("cpu")
-    rng = np.random.default_rng(seeding.stream(seed, "collocation"))
-    ll = LastLayer(model, 0, problem, data, rng, n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
-                   beta_rel=settings.beta_rel, images=settings.images, vary_first_mode=False)
-    z_pot = z_pot_cls(ll, ei_prior, noise, shift)
-    sigma0 = max(math.sqrt(ll.fit_rss / max(ll.n, 1)), noise.low * 10)
-    z_map = _map(z_pot, np.array([math.log(ll.theta_fit), math.log(sigma0)]))
-    L = _laplace_factor(z_pot, z_map)
+def sample_full(start, seed, opts, shift):
+    """The full-weight variant of `bpinn._sample`, from `bpinn.last_layer_map`'s (model, LastLayer with the
+    first mode held, potential, MAP, Laplace factor): z draws (chain, draw, 2), diagnostics, predictor."""
+    model, ll, z_pot, z_map, L = start
     fw = FullWeight(ll, model.member(0), opts.device)
     pot = _FullPotential(fw, z_pot, z_map, L)
     s = FullHMCSettings.for_profile(opts.profile)
