@@ -89,7 +89,7 @@ def run_options(args, snr_db: float | None = None) -> RunOptions:
         members=args.members,
         device=resolve_device(args.device),
         noise_prior=args.noise_prior,
-        bpinn_variant=getattr(args, "bpinn_variant", "auto"),
+        bpinn_variant=args.bpinn_variant,
         snr_db=snr_db,
         progress=not args.quiet,
     )

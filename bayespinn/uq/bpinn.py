@@ -126,13 +126,17 @@ class _Whitened:
     depth until its mass-matrix windows catch up (measured: 2.7 s per iteration at the clean level); in u it
     is about a unit Gaussian from the first step."""
 
-    def __init__(self, pot: _Potential, z_map: np.ndarray, L: np.ndarray):
+    def __init__(self, pot: _Potential, z_map: np.ndarray, L: np.ndarray, device: str | torch.device = "cpu"):
         self.pot = pot
-        self.z_map = torch.tensor(z_map, dtype=torch.float64)
-        self.L = torch.tensor(L, dtype=torch.float64)
+        self.z_map = torch.tensor(z_map, dtype=torch.float64, device=device)
+        self.L = torch.tensor(L, dtype=torch.float64, device=device)
 
     def z(self, u):
         return self.z_map + self.L @ u
+
+    def z_draws(self, u: torch.Tensor) -> np.ndarray:
+        """Draws of z (n, 2) from draws of u (n, 2)."""
+        return (self.z_map[None, :] + u.detach().to(torch.float64) @ self.L.T).cpu().numpy()
 
     def __call__(self, params: dict) -> torch.Tensor:
         return self.pot({"z": self.z(params["u"])})
@@ -157,8 +161,7 @@ def nuts(pot: _Potential, z_map: np.ndarray, L: np.ndarray, s: NUTSSettings, see
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 mcmc.run()
-            u = mcmc.get_samples()["u"].detach().to(torch.float64)
-            out.append((wpot.z_map[None, :] + u @ wpot.L.T).numpy())
+            out.append(wpot.z_draws(mcmc.get_samples()["u"]))
     return np.stack(out)
 
 
@@ -190,7 +193,7 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
     ei_prior = EIPrior.from_spec(cfg.prior)
     # EI = EI_ref theta / beta_factor
     shift = math.log(problem.EI_ref) - math.log(res.beta_factor)
-    variant = resolve_variant(getattr(opts, "bpinn_variant", "auto"), opts.profile, opts.device)
+    variant = resolve_variant(opts.bpinn_variant, opts.profile, opts.device)
     if variant == "full":
         from .bpinn_full import FULL_VARIANT, sample_full
 

@@ -45,6 +45,7 @@ from torch import nn
 from .. import seeding
 from ..pinn.network import PINN
 from ..pinn.taylor import Jet
+from .bpinn import NUTSSettings, _Whitened
 from .lastlayer import LastLayer
 
 log = logging.getLogger(__name__)
@@ -58,10 +59,9 @@ PREDICTIVE_DRAWS = 100
 
 
 @dataclass(frozen=True)
-class FullHMCSettings:
-    chains: int = 4
-    warmup: int = 300
-    samples: int = 500
+class FullHMCSettings(NUTSSettings):
+    """`bpinn.NUTSSettings` plus NUTS's maximum tree depth (a trajectory costs up to 2^depth - 1 gradients)."""
+
     max_tree_depth: int = 8
 
     @classmethod
@@ -132,10 +132,6 @@ class FullWeight:
     def log_marginal(self, h: torch.Tensor, log_theta: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
         return self.model_at(h).log_marginal(log_theta, log_sigma)
 
-    @staticmethod
-    def log_prior_hidden(h: torch.Tensor) -> torch.Tensor:
-        return -0.5 * (h * h).sum() / HIDDEN_PRIOR_SD**2
-
 
 def _moved(ll: LastLayer, device: torch.device) -> LastLayer:
     """A copy of ll with its tensors on device (the object itself when already there)."""
@@ -160,14 +156,9 @@ class _FullPotential:
     def __init__(self, fw: FullWeight, z_pot, z_map: np.ndarray, L: np.ndarray,
                  prior_mean: torch.Tensor | None = None, prior_sd: float = HIDDEN_PRIOR_SD):
         self.fw, self.z_pot = fw, z_pot
-        dev = fw.device
-        self.z_map = torch.tensor(z_map, dtype=torch.float64, device=dev)
-        self.L = torch.tensor(L, dtype=torch.float64, device=dev)
+        self.zw = _Whitened(z_pot, z_map, L, fw.device)
         self.m = torch.zeros_like(fw.h_fit) if prior_mean is None else prior_mean.to(fw.h_fit)
         self.s_h = float(prior_sd)
-
-    def z(self, u):
-        return self.z_map + self.L @ u
 
     def h(self, v):
         return self.m + self.s_h * v
@@ -176,7 +167,7 @@ class _FullPotential:
         return (self.fw.h_fit - self.m) / self.s_h
 
     def __call__(self, params: dict) -> torch.Tensor:
-        v, z = params["v"], self.z(params["u"])
+        v, z = params["v"], self.zw.z(params["u"])
         lt, ls = z[0], z[1]
         return -(self.fw.log_marginal(self.h(v), lt, ls) - 0.5 * (v * v).sum() + self.z_pot.log_prior(lt, ls))
 
@@ -205,7 +196,7 @@ def full_nuts(pot: _FullPotential, s: FullHMCSettings, seed, progress: bool):
                 warnings.simplefilter("ignore")
                 mcmc.run()
         smp = mcmc.get_samples()
-        z = (pot.z_map[None, :] + smp["u"].detach().to(torch.float64) @ pot.L.T).cpu().numpy()
+        z = pot.zw.z_draws(smp["u"])
         zs.append(z)
         idx = np.linspace(0, s.samples - 1, min(keep, s.samples)).round().astype(int)
         hs.append(pot.h(smp["v"].detach()[idx]).cpu())

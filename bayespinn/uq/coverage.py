@@ -132,9 +132,6 @@ class Checkpoint:
             fh.flush()
             os.fsync(fh.fileno())
 
-    def remove(self) -> None:
-        self.path.unlink(missing_ok=True)
-
 
 def coverage_study(
     method: str,
