@@ -10,7 +10,7 @@ from scipy import stats
 from bayespinn.config import preset
 from bayespinn.data.synthetic import simulate
 from bayespinn.physics.modal import ModalModel
-from bayespinn.uq.coverage import binomial_acceptance, coverage_study
+from bayespinn.uq.coverage import binomial_acceptance, coverage_study, paired_with_reference
 from bayespinn.uq.methods import RunOptions
 from bayespinn.uq.modal_mcmc import modal_posterior
 from bayespinn.uq.posterior import Posterior
@@ -127,6 +127,45 @@ def test_coverage_negative_control_detects_a_wrong_truth():
     assert lo <= res["hits"] <= hi
     shifted = [r for r in res["records"] if r["interval"][0] <= r["EI_true"] * (1 + 2 * r["sd_rel_pct"] / 100) <= r["interval"][1]]
     assert len(shifted) < lo
+
+
+def _study(seed=0, truth="fixed", shift_sd=0.0, sd_factor=1.0, n=8):
+    """A coverage study dict with made-up records: replicate i has relative error e_i and sd s_i."""
+    r = np.random.default_rng(3)
+    e, s = r.normal(0, 3, n), r.uniform(2, 4, n)
+    recs = [{"index": i, "rel_error_pct": float(e[i] + shift_sd * s[i]), "sd_rel_pct": float(sd_factor * s[i]),
+             "hit": bool(abs(e[i] + shift_sd * s[i]) < 1.645 * sd_factor * s[i])} for i in range(n)]
+    return {"method": "x", "seed": seed, "snr_db": 10.0, "case": "deflection", "truth": truth, "records": recs}
+
+
+def test_paired_comparison_with_the_reference():
+    ref = _study()
+    same = paired_with_reference(_study(), ref)
+    assert same["datasets"] == 8 and same["mean_z"] == 0.0 and same["median_sd_ratio"] == 1.0
+    assert same["sd_ratio_in_band"] == 1.0 and same["hits"] == same["reference_hits"]
+    # negative control: a posterior 2 reference sds off and half as wide is caught on every dataset
+    bad = paired_with_reference(_study(shift_sd=1.0, sd_factor=0.5), ref)
+    assert bad["mean_z"] == pytest.approx(1.0) and bad["sd_z"] == pytest.approx(0.0, abs=1e-12)
+    assert bad["median_sd_ratio"] == pytest.approx(0.5) and bad["sd_ratio_in_band"] == 0.0
+    # other datasets (another seed) or a truth drawn per replicate: no pairing
+    assert paired_with_reference(_study(seed=1), ref) is None
+    assert paired_with_reference(_study(truth="prior"), _study(truth="prior")) is None
+
+
+def test_coverage_replicates_share_datasets_across_runs():
+    """Replicate i's dataset depends on (seed, SNR, i) only: two modal studies whose samplers differ
+    pair up with z within Monte Carlo error; a study of another seed's datasets, forced into the pairing,
+    does not (negative control)."""
+    cfg, opts = preset(), RunOptions(profile="smoke")
+    a = coverage_study("modal", cfg, 10.0, replicates=3, seed=2, progress=False, opts=opts)
+    b = coverage_study("modal", cfg, 10.0, replicates=3, seed=2, progress=False,
+                       opts=RunOptions(profile="smoke", mcmc=MCMCSettings(n_walkers=24, n_groups=3)))
+    p = paired_with_reference(b, a)
+    # measured: max |z| 0.024, sd ratios 1.017-1.034; the forced pairing below: max |z| 3.07
+    assert p["datasets"] == 3 and p["max_abs_z"] < 0.15 and 0.85 < p["median_sd_ratio"] < 1.15
+    c = coverage_study("modal", cfg, 10.0, replicates=3, seed=3, progress=False, opts=opts)
+    forced = paired_with_reference(dict(c, seed=2), a)
+    assert forced["max_abs_z"] > 0.5
 
 
 @pytest.mark.slow

@@ -174,6 +174,19 @@ def test_coverage_modal(tmp_path):
     full = load(tmp_path / row["file"])
     assert full["schema"] == "bayespinn.coverage/1" and len(full["records"]) == 3
     assert_provenance((tmp_path / "coverage.md").read_text(encoding="utf-8"), "coverage.py")
+    # --report-only rebuilds the page; a PINN study of the same datasets is set beside the reference,
+    # dataset by dataset (here a copy of the modal study posing as the ensemble: z = 0, sd ratio 1)
+    (tmp_path / "coverage" / "ensemble-snr30.json").write_text(
+        json.dumps(dict(full, method="ensemble")), encoding="utf-8"
+    )
+    doc["rows"].append(dict(row, method="ensemble", file="coverage/ensemble-snr30.json"))
+    (tmp_path / "coverage.json").write_text(json.dumps(doc), encoding="utf-8")
+    study("coverage.py", "--report-only", "--out", str(tmp_path), "--quiet")
+    rows = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}
+    pr = rows["ensemble"]["paired_reference"]
+    assert pr["datasets"] == 3 and pr["mean_z"] == 0.0 and pr["median_sd_ratio"] == 1.0
+    assert "paired_reference" not in rows["modal_mcmc"]
+    assert "dataset by dataset" in (tmp_path / "coverage.md").read_text(encoding="utf-8")
 
 
 def test_bad_method_is_bad_usage(tmp_path):

@@ -192,3 +192,43 @@ def coverage_study(
         "resumed_replicates": sum(1 for i in range(replicates) if i in have),
         "records": recs,
     }
+
+
+#: the issues' band for an approximate posterior's sd against the reference's
+SD_RATIO_BAND = (0.67, 1.5)
+
+
+def paired_with_reference(study: dict, reference: dict) -> dict | None:
+    """Each replicate of `study` against the reference posterior of the same dataset.
+
+    Two coverage studies share their datasets when they share seed, SNR, case and truth ('fixed'):
+    replicate i simulates the same sample points and noise whatever the method. On each shared
+    dataset, z = (mean - reference mean) / reference sd and r = sd / reference sd judge the method's
+    posterior against the reference one, free of the luck of that dataset (a miss of both says the
+    dataset was extreme, not that the method failed). Returns None when the studies do not share
+    datasets.
+    """
+    same = all(study.get(k) == reference.get(k) for k in ("seed", "snr_db", "case", "truth"))
+    if not same or study.get("truth") != "fixed":
+        return None
+    ref = {r["index"]: r for r in reference["records"]}
+    pairs = [(r, ref[r["index"]]) for r in study["records"] if r["index"] in ref]
+    if not pairs:
+        return None
+    z = np.array([(r["rel_error_pct"] - q["rel_error_pct"]) / q["sd_rel_pct"] for r, q in pairs])
+    ratio = np.array([r["sd_rel_pct"] / q["sd_rel_pct"] for r, q in pairs])
+    lo, hi = SD_RATIO_BAND
+    return {
+        "reference": reference["method"],
+        "datasets": len(pairs),
+        "mean_z": float(z.mean()),
+        "sd_z": float(z.std(ddof=1)) if len(z) > 1 else float("nan"),
+        "max_abs_z": float(np.abs(z).max()),
+        "median_sd_ratio": float(np.median(ratio)),
+        "sd_ratio_range": [float(ratio.min()), float(ratio.max())],
+        "sd_ratio_in_band": float(np.mean((ratio >= lo) & (ratio <= hi))),
+        "sd_ratio_band": list(SD_RATIO_BAND),
+        "hits": int(sum(r["hit"] for r, _ in pairs)),
+        "reference_hits": int(sum(q["hit"] for _, q in pairs)),
+        "misses_of_both": int(sum((not r["hit"]) and (not q["hit"]) for r, q in pairs)),
+    }
