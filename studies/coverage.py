@@ -203,7 +203,7 @@ def paired_blocks(doc: dict) -> list:
                 c.snr_text(r["snr_db"]),
                 str(p["datasets"]),
                 f"{p['mean_z']:+.2f}",
-                f"{p['sd_z']:.2f}",
+                "n/a" if p["sd_z"] is None else f"{p['sd_z']:.2f}",
                 f"{p['max_abs_z']:.2f}",
                 f"{p['median_sd_ratio']:.2f}",
                 f"[{p['sd_ratio_range'][0]:.2f}, {p['sd_ratio_range'][1]:.2f}]",
@@ -238,6 +238,14 @@ def paired_blocks(doc: dict) -> list:
     ]
 
 
+def write_page(doc: dict, out: Path) -> None:
+    """coverage.json and coverage.md of the table doc, with the paired comparisons brought up to date."""
+    add_paired(doc, out)
+    c.write_json(out / "coverage.json", doc)
+    c.write_markdown(out / "coverage.md", blocks(doc))
+    log.info("wrote %s and %s", out / "coverage.md", out / "coverage.json")
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     p = c.parser("Coverage of the true EI by each method's credible intervals (deflection case).")
@@ -263,10 +271,7 @@ def main(argv: list[str] | None = None) -> int:
         doc = c.load_table(out / "coverage.json", SCHEMA)
         if not doc["rows"]:
             raise InputError("--out", str(out), "a folder with a coverage.json from an earlier study")
-        add_paired(doc, out)
-        c.write_json(out / "coverage.json", doc)
-        c.write_markdown(out / "coverage.md", blocks(doc))
-        log.info("rebuilt %s and %s", out / "coverage.md", out / "coverage.json")
+        write_page(doc, out)
         return 0
     methods = c.methods_of(args.methods)
     levels = c.levels_of(args.snr)
@@ -325,10 +330,7 @@ def main(argv: list[str] | None = None) -> int:
     doc = c.load_table(out / "coverage.json", SCHEMA)
     doc.update(case="deflection", truth={"EI": cfg.beam.EI})
     c.merge(doc, new_rows, prov, ("snr_db", "method"), sort_key)
-    add_paired(doc, out)
-    c.write_json(out / "coverage.json", doc)
-    c.write_markdown(out / "coverage.md", blocks(doc))
-    log.info("wrote %s and %s", out / "coverage.md", out / "coverage.json")
+    write_page(doc, out)
     return 0
 
 

@@ -222,7 +222,7 @@ def paired_with_reference(study: dict, reference: dict) -> dict | None:
         "reference": reference["method"],
         "datasets": len(pairs),
         "mean_z": float(z.mean()),
-        "sd_z": float(z.std(ddof=1)) if len(z) > 1 else float("nan"),
+        "sd_z": float(z.std(ddof=1)) if len(z) > 1 else None,
         "max_abs_z": float(np.abs(z).max()),
         "median_sd_ratio": float(np.median(ratio)),
         "sd_ratio_range": [float(ratio.min()), float(ratio.max())],
