@@ -151,3 +151,24 @@ def test_free_vibrations_solve_the_homogeneous_equation():
     assert float(r.abs().max()) < 1e-9 * float(j.dx(4).abs().max())
     jb = fv.jet(torch.ones_like(tau), tau, 2, 0, s)
     assert float(jb.value.abs().max()) < 1e-12 and float(jb.dx(2).abs().max()) < 1e-9
+
+
+def test_static_enrichment_reuses_the_jet_of_the_same_points():
+    """The enrichment's jet is kept per point set: the same tensors give the same Jet object, new or
+    modified tensors a fresh one, and a copy made by pickling starts empty (it carries no tensors)."""
+    import pickle
+
+    enr = StaticEnrichment((0.7, 1.0), (0.0, 0.25), 1.3, 0.03)
+    xi, tau = torch.rand(1, 50, dtype=torch.float64), torch.rand(1, 50, dtype=torch.float64)
+    j = enr.jet(xi, tau, 4, 2)
+    assert enr.jet(xi, tau, 4, 2) is j
+    assert enr.jet(xi, tau, 2, 0) is not j  # other orders: another entry
+    other = xi.clone()
+    j2 = enr.jet(other, tau, 4, 2)
+    assert j2 is not j and torch.equal(j2.dx(4), j.dx(4))
+    other.mul_(0.5)  # modified in place: a miss, and the new values
+    assert torch.equal(enr.jet(other, tau, 4, 2).value, enr._jet(other, tau, 4, 2).value)
+    grad_xi = xi.clone().requires_grad_(True)  # points with gradients are never cached
+    assert enr.jet(grad_xi, tau, 1, 0).value.requires_grad
+    copy = pickle.loads(pickle.dumps(enr))
+    assert copy == enr and not copy._cache.items and len(pickle.dumps(enr)) < 2000

@@ -168,3 +168,17 @@ def test_enriched_output_layer_identifies_ei_and_controls_fail(problem):
     assert err() < ENRICHED_TOL
     assert err(free_modes=0) > CONTROL_MISS
     assert err(enrich=False, free_modes=0) > CONTROL_MISS
+
+
+def test_enrichment_cache_changes_no_bit(problem, monkeypatch):
+    """The fast profile's output layer with the static enrichment's jet cache and without it: the same fit,
+    bit for bit (smoke-sized network and steps, the fast profile's enrichment and free vibrations)."""
+    from bayespinn.pinn.enrich import _JetCache
+
+    s = dataclasses.replace(SMOKE, enrich=True, free_modes=3, resample_every=10, epochs=30, lbfgs_iters=5)
+    cached = fit(problem, s, seed=3, quiet=True)
+    monkeypatch.setattr(_JetCache, "usable", staticmethod(lambda xi, tau: False))
+    plain = fit(problem, s, seed=3, quiet=True)
+    assert cached.EI == plain.EI
+    for k, v in cached.state.items():
+        assert torch.equal(v, plain.state[k]), k

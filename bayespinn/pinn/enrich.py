@@ -17,12 +17,17 @@ and the PDE residual ties it to EI, so EI is still identified by the loss terms 
 network learns everything else: the dynamics, the initial conditions, any departure from the load model.
 
 Derivatives are exact: d/dxi and d/dtau of the sines shift their phase by pi/2.
+
+E depends on the points alone, and a series of ~300 sines per point cost a tenth of a training step, so
+each enrichment keeps the jets of the last few point sets it was asked for (`_JetCache`): the data points
+never change during a fit and the collocation points only every `resample_every` steps.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections import OrderedDict
+from dataclasses import dataclass, field
 
 import torch
 from torch import Tensor
@@ -38,6 +43,46 @@ def n_terms(beta_rel: float, tol: float = SERIES_TOL) -> int:
     return max(8, int(math.ceil(2.0 * math.sqrt(math.log(1.0 / tol)) / (math.pi * beta_rel))) + 1)
 
 
+def _compiling() -> bool:
+    f = getattr(torch.compiler, "is_compiling", None)  # torch >= 2.3
+    return bool(f()) if f is not None else bool(torch._dynamo.is_compiling())
+
+
+class _JetCache:
+    """The jets of the last `size` point sets, keyed by the very tensors (identity and version, so a new or
+    modified tensor is a miss). Not kept for points that carry gradients, nor while torch.compile traces;
+    not pickled (a copy starts empty)."""
+
+    def __init__(self, size: int = 8):
+        self.size = size
+        self.items: OrderedDict = OrderedDict()
+
+    @staticmethod
+    def usable(xi: Tensor, tau: Tensor) -> bool:
+        return not (xi.requires_grad or tau.requires_grad or _compiling())
+
+    def get(self, xi: Tensor, tau: Tensor, kx: int, kt: int, make) -> Jet:
+        if not self.usable(xi, tau):
+            return make()
+        key = (id(xi), id(tau), kx, kt)
+        hit = self.items.get(key)
+        # the entry holds its tensors, so their ids cannot be reused while it lives
+        if hit is not None and hit[0] is xi and hit[1] is tau and hit[2] == (xi._version, tau._version):
+            self.items.move_to_end(key)
+            return hit[3]
+        jet = make()
+        self.items[key] = (xi, tau, (xi._version, tau._version), jet)
+        while len(self.items) > self.size:
+            self.items.popitem(last=False)
+        return jet
+
+    def __getstate__(self) -> dict:
+        return {"size": self.size}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["size"])
+
+
 @dataclass(frozen=True)
 class StaticEnrichment:
     """The axles in non-dimensional form (see module docstring).
@@ -49,11 +94,16 @@ class StaticEnrichment:
     delays: tuple[float, ...]
     speed: float
     beta_rel: float
+    _cache: _JetCache = field(default_factory=_JetCache, init=False, repr=False, compare=False)
 
     n_features = 1
 
     def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor | None = None) -> Jet:
-        """Jet of E at points (M, N): components (M, N, 1) (``log_ei`` is not used)."""
+        """Jet of E at points (M, N): components (M, N, 1) (``log_ei`` is not used); the same Jet object
+        again for the same point tensors (its components are never modified in place)."""
+        return self._cache.get(xi, tau, kx, kt, lambda: self._jet(xi, tau, kx, kt))
+
+    def _jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet:
         n = n_terms(self.beta_rel)
         k = math.pi * torch.arange(1, n + 1, dtype=xi.dtype, device=xi.device)  # (n,)
         g = 2.0 * torch.exp(-((k * self.beta_rel) ** 2) / 4.0) / k**4 * 48.0
