@@ -101,6 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--level", type=parse_level, default=0.9)
     c.add_argument("--truth", default="fixed", help="fixed (the config's EI) or prior (draw EI per replicate: SBC)")
     c.add_argument("--out", help="coverage JSON file (default reports/coverage/<method>-snr<S>-seed<seed>.json)")
+    c.add_argument("--resume", action="store_true",
+                   help="reuse the replicates of the --out file already there when it is the same study "
+                        "(same method, configuration, SNR, seed, level and options)")
 
     m = sub.add_parser("simulate", help="write a synthetic measurement CSV")
     _common(m, method=False)

@@ -12,7 +12,8 @@ per-replicate records) goes into <out>/coverage/<method>-snr<S>.json.
 All methods see the same datasets (replicate i of a seed and SNR), so each PINN study is also set
 beside the modal reference posterior dataset by dataset (`paired_with_reference`): hits on the truth of
 a few dozen datasets are a coarse test; the PINN posterior against the exact one on the same data is a
-sharp one. `--report-only` rebuilds the page from the study files already there.
+sharp one. `--report-only` rebuilds the page from the study files already there; `--resume` reuses the
+replicates of a study file already there when it is the same study (a PINN study spread over sessions).
 
     python studies/coverage.py --methods modal --out reports/paper
 """
@@ -260,6 +261,12 @@ def main(argv: list[str] | None = None) -> int:
         "--workers", type=int, default=None, help="local worker processes (default one per core)"
     )
     p.add_argument(
+        "--resume",
+        action="store_true",
+        help="reuse the replicates of each study file already in --out/coverage when it is the same "
+        "study (a study carried over several sessions)",
+    )
+    p.add_argument(
         "--report-only",
         action="store_true",
         help="run nothing: rebuild coverage.md/json from the study files already in --out",
@@ -297,7 +304,8 @@ def main(argv: list[str] | None = None) -> int:
         for snr in levels:
             log.info("coverage: %s at %s dB, %d replicates", key, snr_label(snr), reps[m])
             # finished replicates survive an interruption; the same command resumes from them
-            partial = out / "coverage" / f"{key}-snr{snr_label(snr)}.json.partial.jsonl"
+            study = out / "coverage" / f"{key}-snr{snr_label(snr)}.json"
+            partial = study.with_name(study.name + ".partial.jsonl")
             res = coverage_study(
                 m,
                 cfg,
@@ -309,8 +317,9 @@ def main(argv: list[str] | None = None) -> int:
                 executor=executor,
                 progress=not args.quiet,
                 checkpoint=partial,
+                resume_from=study if args.resume else None,
             )
-            c.write_json(out / "coverage" / f"{key}-snr{snr_label(snr)}.json", res)
+            c.write_json(study, res)
             partial.unlink(missing_ok=True)
             row = {k: v for k, v in res.items() if k != "records"}
             row["acceptance_99"] = list(

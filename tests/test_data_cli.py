@@ -1,5 +1,6 @@
 """Configuration, synthetic data, the measurement CSV and the command line's handling of bad input."""
 
+import json
 import subprocess
 import sys
 
@@ -166,3 +167,19 @@ def test_cuda_without_gpu_is_bad_input(tmp_path):
         pytest.skip("a GPU is present")
     r = _cli("simulate", "--snr", "10", "--device", "cuda", "--out", str(tmp_path / "a.csv"))
     assert r.returncode == 2 and "cuda" in r.stderr.lower()
+
+
+def test_cli_coverage_resumes_from_its_file(tmp_path):
+    """`coverage --resume` reuses the replicates of the --out file of the same study and runs the rest;
+    without --resume the study starts afresh."""
+    out = tmp_path / "cov.json"
+    args = ("coverage", "--method", "modal", "--snr", "30", "--profile", "smoke", "--out", str(out), "--quiet")
+    assert _cli(*args, "--replicates", "1").returncode == 0
+    first = json.loads(out.read_text(encoding="utf-8"))
+    r = _cli(*args, "--replicates", "2", "--resume")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(out.read_text(encoding="utf-8"))
+    assert res["resumed_replicates"] == 1 and res["records"][0] == first["records"][0]
+    assert res["fingerprint"] == first["fingerprint"] and len(res["records"]) == 2
+    assert _cli(*args, "--replicates", "2").returncode == 0
+    assert json.loads(out.read_text(encoding="utf-8"))["resumed_replicates"] == 0

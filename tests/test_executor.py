@@ -90,6 +90,35 @@ def test_coverage_resumes_from_its_checkpoint(tmp_path, monkeypatch):
     assert calls == [0, 1] and other["resumed_replicates"] == 0
 
 
+def test_coverage_resumes_from_an_earlier_study_file(tmp_path, monkeypatch):
+    """A study carried over two sessions: the first writes 2 replicates to its file, the second asks for 4
+    with that file to resume from, runs replicates 2 and 3 only and gives the records of one uninterrupted
+    study. A file of another study (other seed), or one without a fingerprint, gives nothing."""
+    import json
+
+    import bayespinn.uq.coverage as cov
+
+    def run(n, seed=3, resume_from=None):
+        return coverage_study("modal", preset(), 10.0, replicates=n, seed=seed, opts=SMALL, progress=False,
+                              executor=Executor("local", workers=1), resume_from=resume_from)
+
+    first = tmp_path / "first.json"
+    first.write_text(json.dumps(run(2)), encoding="utf-8")
+    calls = []
+    real = cov.run_replicate
+    monkeypatch.setattr(cov, "run_replicate", lambda t: (calls.append(t.index), real(t))[1])
+    res = run(4, resume_from=first)
+    assert calls == [2, 3] and res["resumed_replicates"] == 2
+    assert _strip(res) == _strip(_study(Executor("local", workers=1)))
+    calls.clear()
+    assert run(2, seed=4, resume_from=first)["resumed_replicates"] == 0 and calls == [0, 1]
+    old = json.loads(first.read_text(encoding="utf-8"))
+    del old["fingerprint"]
+    first.write_text(json.dumps(old), encoding="utf-8")
+    calls.clear()
+    assert run(2, resume_from=first)["resumed_replicates"] == 0 and calls == [0, 1]
+
+
 def _ensemble(executor, seed=3):
     import numpy as np
 

@@ -187,6 +187,12 @@ def test_coverage_modal(tmp_path):
     assert pr["datasets"] == 3 and pr["mean_z"] == 0.0 and pr["median_sd_ratio"] == 1.0
     assert "paired_reference" not in rows["modal_mcmc"]
     assert "dataset by dataset" in (tmp_path / "coverage.md").read_text(encoding="utf-8")
+    # a study carried on later: --resume reuses the 3 replicates of its file and runs one more
+    study("coverage.py", "--profile", "smoke", "--methods", "modal", "--snr", "30", "--replicates", "4",
+          "--resume", "--out", str(tmp_path), "--quiet")
+    again = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}["modal_mcmc"]
+    assert again["replicates"] == 4 and again["resumed_replicates"] == 3
+    assert load(tmp_path / again["file"])["records"][:3] == full["records"]
 
 
 def test_bad_method_is_bad_usage(tmp_path):

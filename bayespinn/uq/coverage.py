@@ -102,9 +102,9 @@ class Checkpoint:
     """Finished replicates of one study, one JSON line each after a header line with the study's fingerprint,
     appended and flushed as each replicate ends, so an interrupted study resumes where it stopped."""
 
-    def __init__(self, path: str | Path, key: str):
+    def __init__(self, path: str | Path, key: str, earlier: dict[int, dict] | None = None):
         self.path, self.key = Path(path), key
-        self.done: dict[int, dict] = {}
+        self.done: dict[int, dict] = dict(earlier or {})
         if self.path.exists():
             lines = self.path.read_text(encoding="utf-8").splitlines()
             head = json.loads(lines[0]) if lines else {}
@@ -133,6 +133,24 @@ class Checkpoint:
             os.fsync(fh.fileno())
 
 
+def earlier_records(path: str | Path, key: str) -> dict[int, dict]:
+    """The per-replicate records of a study file written earlier (`coverage_study`'s JSON) when it is the same
+    study (same fingerprint), else none: a study carried over several sessions resumes from its committed
+    file, where the checkpoint of an interrupted run is gone."""
+    path = Path(path)
+    if not path.is_file():
+        return {}
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        log.warning("%s is not a study file; nothing reused from it", path)
+        return {}
+    if doc.get("fingerprint") != key:
+        log.info("%s is another study (or predates study fingerprints); nothing reused from it", path)
+        return {}
+    return {int(r["index"]): r for r in doc.get("records", [])}
+
+
 def coverage_study(
     method: str,
     cfg: Config,
@@ -146,11 +164,15 @@ def coverage_study(
     executor: Executor | None = None,
     progress: bool = True,
     checkpoint: str | Path | None = None,
+    resume_from: str | Path | None = None,
 ) -> dict:
-    """Run the study; returns the contract's coverage JSON (plus per-replicate records).
+    """Run the study; returns the contract's coverage JSON (plus per-replicate records and the study's
+    `fingerprint`).
 
     checkpoint : a file that keeps every finished replicate; a study started again with the same settings
         reuses them and runs only the rest (the caller removes it once the result is written)
+    resume_from : a study file written earlier (this function's JSON); its replicates are reused when it is
+        the same study (`earlier_records`), e.g. to run 30 replicates over two sessions
     """
     t0 = time.perf_counter()
     # the replicates are the parallel tasks: inside one, an ensemble's members train one after another in
@@ -161,8 +183,10 @@ def coverage_study(
         from .sampler import MCMCSettings
 
         opts = dataclasses.replace(opts, mcmc=MCMCSettings.for_coverage())
-    ck = Checkpoint(checkpoint, fingerprint(method, cfg, snr_db, seed, level, truth, opts)) if checkpoint else None
-    have = ck.done if ck else {}
+    key = fingerprint(method, cfg, snr_db, seed, level, truth, opts)
+    earlier = earlier_records(resume_from, key) if resume_from is not None else {}
+    ck = Checkpoint(checkpoint, key, earlier) if checkpoint else None
+    have = ck.done if ck else earlier
     tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in range(replicates) if i not in have]
     new = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress,
                                        resources=task_resources(opts.device if method != "modal" else "cpu"),
@@ -190,6 +214,7 @@ def coverage_study(
         "acceptance_99": list(binomial_acceptance(replicates, level)),
         "converged_fraction": float(np.mean([r["converged"] for r in recs])),
         "resumed_replicates": sum(1 for i in range(replicates) if i in have),
+        "fingerprint": key,
         "records": recs,
     }
 
