@@ -296,6 +296,18 @@ def write_json(path: Path, obj: dict) -> None:
     atomic_write_text(path, json.dumps(jsonable(obj), indent=2) + "\n")
 
 
+def not_run_yet(doc: dict) -> list:
+    """A paragraph naming the methods without rows in a table's doc (none when every method has rows)."""
+    from bayespinn.report.document import Paragraph
+    from bayespinn.report.units import name
+
+    missing = [k for k in METHOD_ORDER if k not in {r["method"] for r in doc["rows"]}]
+    if not missing:
+        return []
+    text = ", ".join(name(k) for k in missing)
+    return [Paragraph(f"Not run yet: {text} (add them with `--methods`; existing rows are kept).")]
+
+
 def write_markdown(path: Path, blocks: list) -> None:
     from bayespinn.report.markdown import render_markdown
 

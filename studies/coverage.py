@@ -150,15 +150,7 @@ def blocks(doc: dict) -> list:
             )
         )
     out += paired_blocks(doc)
-    missing = [k for k in c.METHOD_ORDER if k not in {r["method"] for r in doc["rows"]}]
-    if missing:
-        out.append(
-            Paragraph(
-                "Not run yet: "
-                + ", ".join(name(k) for k in missing)
-                + " (add them with `--methods`; existing rows are kept)."
-            )
-        )
+    out += c.not_run_yet(doc)
     out += [
         Heading("Files"),
         BulletList(

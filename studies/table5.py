@@ -223,15 +223,7 @@ def blocks(doc: dict) -> list:
                 f"M {100 * cov['moment']:.0f} %; {r['source']}; {same}."
             )
         out.append(BulletList(tuple(notes)))
-    missing = [k for k in c.METHOD_ORDER if k not in {r["method"] for r in doc["rows"]}]
-    if missing:
-        out.append(
-            Paragraph(
-                "Not run yet: "
-                + ", ".join(name(k) for k in missing)
-                + " (add them with `--methods`; existing rows are kept)."
-            )
-        )
+    out += c.not_run_yet(doc)
     out += [
         Heading("Provenance"),
         BulletList(tuple(c.provenance_lines(doc["runs"], list(doc["runs"])))),
