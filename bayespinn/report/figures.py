@@ -51,6 +51,12 @@ def _color(key: str) -> str:
     return COLORS.get(key, "#7f7f7f")
 
 
+def _band(ax, s, mean, lo, hi, f: float, key: str, lw: float, mean_label: bool = True) -> None:
+    """A method's 90 % band and mean along s, in display units (times f), in its colour."""
+    ax.fill_between(s, lo * f, hi * f, color=_color(key), alpha=0.25, lw=0, label=f"{name(key)} 90 % band")
+    ax.plot(s, mean * f, color=_color(key), lw=lw, label=f"{name(key)} mean" if mean_label else None)
+
+
 def _new_figure(w: float, h: float):
     from matplotlib.figure import Figure
 
@@ -210,16 +216,7 @@ def _strain_fit(result, posts, path: Path, rng: np.random.Generator) -> str:
             lo, hi = pv.predictive_band(resp, p.sigma, rng)
             hits[key][0] += int(np.sum((v >= lo) & (v <= hi)))
             hits[key][1] += v.size
-            ax.fill_between(
-                t,
-                lo * f,
-                hi * f,
-                color=_color(key),
-                alpha=0.25,
-                lw=0,
-                label=f"{name(key)} 90 % band",
-            )
-            ax.plot(t, mean * f, color=_color(key), lw=1.2)
+            _band(ax, t, mean, lo, hi, f, key, lw=1.2, mean_label=False)
         ax.set_title(f"{label} (x = {x:.2f} m, {'bottom' if y > 0 else 'top'} flange)", fontsize=9)
         ax.set_xlabel("time t (s)")
         ax.set_ylabel(f"strain ({unit})")
@@ -257,16 +254,7 @@ def span_profiles_figure(result, cfg: Config, path: Path, rng: np.random.Generat
             ax = axes[i, j]
             for key, p in posts.items():
                 mean, lo, hi = pv.band(pv.predict(p, x, np.full(x.size, t), q, rng))
-                ax.fill_between(
-                    x,
-                    lo * f,
-                    hi * f,
-                    color=_color(key),
-                    alpha=0.25,
-                    lw=0,
-                    label=f"{name(key)} 90 % band",
-                )
-                ax.plot(x, mean * f, color=_color(key), lw=1.3, label=f"{name(key)} mean")
+                _band(ax, x, mean, lo, hi, f, key, lw=1.3)
             if result.truth is not None:
                 ax.plot(
                     x,
@@ -350,16 +338,7 @@ def gauges_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> 
             held_out.append(s.name)
         for key, p in posts.items():
             mean, lo, hi = pv.band(pv.predict(p, np.full(t.size, s.x), t, "strain", rng, y=s.y))
-            ax.fill_between(
-                t,
-                lo * f,
-                hi * f,
-                color=_color(key),
-                alpha=0.25,
-                lw=0,
-                label=f"{name(key)} 90 % band",
-            )
-            ax.plot(t, mean * f, color=_color(key), lw=1.2, label=f"{name(key)} mean")
+            _band(ax, t, mean, lo, hi, f, key, lw=1.2)
         if result.truth is not None:
             ax.plot(
                 t,
