@@ -77,7 +77,7 @@ def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True
     p.add_argument("--noise-prior", dest="noise_prior", default="vague", help="vague or snr")
     p.add_argument("--bpinn-variant", dest="bpinn_variant", default="auto",
                    help="B-PINN sampler: last-layer, full (every hidden weight), or auto (default: full for "
-                        "--profile paper and on a GPU, else last-layer)")
+                        "--profile paper, else last-layer)")
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 

@@ -67,7 +67,7 @@ def parser(description: str) -> argparse.ArgumentParser:
         dest="bpinn_variant",
         default="auto",
         choices=("auto", "last-layer", "full"),
-        help="B-PINN sampler (default auto: full for --profile paper and on a GPU, else last-layer)",
+        help="B-PINN sampler (default auto: full for --profile paper, else last-layer)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress output")
     return p
