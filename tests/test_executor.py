@@ -165,9 +165,12 @@ def test_sweep_levels_do_not_depend_on_workers(tmp_path):
 def test_bench_ensemble_reports_what_the_toolkit_uses():
     from bayespinn.pinn.bench import bench_ensemble
 
-    r = bench_ensemble(members=2, points=40, repeats=1, warmup=1, parallel_steps=2, workers=2)
+    r = bench_ensemble(members=2, points=40, repeats=1, warmup=1, parallel_steps=2, parallel_rounds=3, workers=2)
     assert r["together"] == "parallel processes" and r["workers"] == 2
     assert r["speedup"] == r["parallel_speedup"] == r["sequential_s"] / r["parallel_s"]
+    # the compared times are the medians of the interleaved rounds
+    assert r["parallel_rounds"] == 3 and len(r["sequential_rounds_s"]) == len(r["parallel_rounds_s"]) == 3
+    assert r["sequential_s"] == sorted(r["sequential_rounds_s"])[1] and r["parallel_s"] == sorted(r["parallel_rounds_s"])[1]
     assert r["batched_speedup"] == r["sequential_ms_per_epoch"] / r["batched_ms_per_epoch"]
 
 
