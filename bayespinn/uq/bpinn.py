@@ -39,15 +39,14 @@ VARIANT = "last-layer B-PINN (output weights marginalised analytically; NUTS on 
 VARIANTS = ("auto", "last-layer", "full")
 
 
-def resolve_variant(name: str, profile: str, device: str) -> str:
+def resolve_variant(name: str, profile: str) -> str:
     """'last-layer' or 'full': 'auto' runs the full-weight sampler (`bpinn_full`) for the paper profile, the
     last-layer one otherwise, on a GPU too.
 
     The device does not decide it: measured on an H100 (fast profile, 20 dB), one gradient of the full
     potential took 0.086 s (0.17 s on the 2-core CPU; the small 5 x 64 network's fourth-order jets are
     launch-bound, not arithmetic-bound) and NUTS warm-up ran at ~8 s per iteration, so the fast profile's
-    3 200 iterations would take hours on a GPU as well; the fast profile promises minutes. `device` is
-    kept in the signature for callers that pass it."""
+    3 200 iterations would take hours on a GPU as well; the fast profile promises minutes."""
     if name not in VARIANTS:
         raise ValueError(f"B-PINN variant must be one of {', '.join(VARIANTS)}, got {name!r}")
     if name != "auto":
@@ -199,7 +198,7 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
     ei_prior = EIPrior.from_spec(cfg.prior)
     # EI = EI_ref theta / beta_factor
     shift = math.log(problem.EI_ref) - math.log(res.beta_factor)
-    variant = resolve_variant(opts.bpinn_variant, opts.profile, opts.device)
+    variant = resolve_variant(opts.bpinn_variant, opts.profile)
     if variant == "full":
         from .bpinn_full import FULL_VARIANT, sample_full
 
