@@ -38,8 +38,8 @@ def _timed(fn: Callable[[], None], device: torch.device) -> float:
     return 1e3 * (time.perf_counter() - t0)
 
 
-def _interleaved(steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int) -> dict[str, float]:
-    """Median ms per call of each step function, measured round-robin after `warmup` calls each."""
+def _rounds(steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int) -> dict[str, list[float]]:
+    """ms of each call of each step function, `repeats` rounds round-robin after `warmup` calls each."""
     for fn in steps.values():
         for _ in range(warmup):
             fn()
@@ -47,7 +47,12 @@ def _interleaved(steps: dict[str, Callable[[], None]], device, warmup: int, repe
     for _ in range(repeats):
         for k, fn in steps.items():
             times[k].append(_timed(fn, device))
-    return {k: statistics.median(v) for k, v in times.items()}
+    return times
+
+
+def _interleaved(steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int) -> dict[str, float]:
+    """Median ms per call of each step function, measured round-robin after `warmup` calls each."""
+    return {k: statistics.median(v) for k, v in _rounds(steps, device, warmup, repeats).items()}
 
 
 def _deflection_problem() -> Problem:
@@ -217,16 +222,17 @@ def bench_ensemble(
     if dev.type == "cpu" and parallel_steps > 0:
         tasks = [(m, parallel_steps, points, width, depth, optimizer) for m in range(members)]
         n = min(workers or cpu_count(), members)
-        seq_s, par_s = [], []
-        for _ in range(max(1, parallel_rounds)):
-            t0 = time.perf_counter()
-            for t in tasks:
-                _train_member_steps(t)
-            seq_s.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            Executor("local", workers=n).map(_train_member_steps, tasks, desc="bench members", progress=False)
-            par_s.append(time.perf_counter() - t0)
-        t_seq, t_par = float(np.median(seq_s)), float(np.median(par_s))
+        ms = _rounds(
+            {
+                "seq": lambda: [_train_member_steps(t) for t in tasks],
+                "par": lambda: Executor("local", workers=n).map(
+                    _train_member_steps, tasks, desc="bench members", progress=False
+                ),
+            },
+            dev, 0, max(1, parallel_rounds),
+        )
+        seq_s, par_s = [1e-3 * v for v in ms["seq"]], [1e-3 * v for v in ms["par"]]
+        t_seq, t_par = statistics.median(seq_s), statistics.median(par_s)
         out.update(workers=n, parallel_steps=parallel_steps, parallel_rounds=len(seq_s), sequential_s=t_seq,
                    parallel_s=t_par, sequential_rounds_s=seq_s, parallel_rounds_s=par_s,
                    parallel_ms_per_epoch=1e3 * t_par / parallel_steps, parallel_speedup=t_seq / t_par,
