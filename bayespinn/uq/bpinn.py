@@ -45,8 +45,9 @@ def resolve_variant(name: str, profile: str) -> str:
 
     The device does not decide it: measured on an H100 (fast profile, 20 dB), one gradient of the full
     potential took 0.086 s (0.17 s on the 2-core CPU; the small 5 x 64 network's fourth-order jets are
-    launch-bound, not arithmetic-bound) and NUTS warm-up ran at ~8 s per iteration, so the fast profile's
-    3 200 iterations would take hours on a GPU as well; the fast profile promises minutes."""
+    launch-bound, not arithmetic-bound) and NUTS warm-up cut its step size to 2.4e-4, the third iteration taking
+    16 s, so the fast profile's 3 200 iterations would take hours on a GPU as well (~20 h at the tree-depth
+    limit); the fast profile promises minutes."""
     if name not in VARIANTS:
         raise ValueError(f"B-PINN variant must be one of {', '.join(VARIANTS)}, got {name!r}")
     if name != "auto":

@@ -34,8 +34,8 @@ Measured on an H100 (torch 2.11, CUDA 13; `bayespinn run --snr 20 --method bpinn
 takes 0.086 s (only 2x the 2-core CPU: the 5 x 64 network's fourth-order jets are many small kernels,
 launch-bound), and NUTS warm-up cut its step size to 2.4e-4 within three iterations, the third taking 16 s.
 At the depth-8 limit (255 gradients, ~22 s per iteration) the fast profile's 3 200 iterations are ~20 h.
-`bayespinn run --snr 20 --method modal,ensemble,bpinn --profile smoke --device cuda --seed 11` (the full
-variant, then the GPU default) ended its chains with R-hat 4.5, bulk ESS 7.
+`bayespinn run --snr 20 --method modal,ensemble,bpinn --profile smoke --device cuda --seed 11 --bpinn-variant
+full` ended its chains with R-hat 4.5, bulk ESS 7.
 """
 
 from __future__ import annotations
