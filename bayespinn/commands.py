@@ -72,7 +72,7 @@ def cmd_coverage(args) -> int:
     res = coverage_study(
         method, cfg, snr, replicates=args.replicates, level=args.level, seed=args.seed, truth=args.truth,
         opts=replace(opts, executor=None), executor=opts.executor, progress=not args.quiet, checkpoint=partial,
-        resume_from=out if args.resume else None,
+        resume_from=out if args.resume else None, mix_versions=args.mix_versions,
     )
     atomic_write_text(out, json.dumps(jsonable(res), indent=2) + "\n")
     partial.unlink(missing_ok=True)

@@ -259,6 +259,12 @@ def main(argv: list[str] | None = None) -> int:
         "study (a study carried over several sessions)",
     )
     p.add_argument(
+        "--mix-versions",
+        dest="mix_versions",
+        action="store_true",
+        help="keep resumed replicates computed by other code than today's (recorded in the study)",
+    )
+    p.add_argument(
         "--report-only",
         action="store_true",
         help="run nothing: rebuild coverage.md/json from the study files already in --out",
@@ -310,6 +316,7 @@ def main(argv: list[str] | None = None) -> int:
                 progress=not args.quiet,
                 checkpoint=partial,
                 resume_from=study if args.resume else None,
+                mix_versions=args.mix_versions,
             )
             c.write_json(study, res)
             partial.unlink(missing_ok=True)

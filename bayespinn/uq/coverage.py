@@ -2,8 +2,11 @@
 
 Each replicate draws fresh sample points and noise (and, for simulation-based calibration, a fresh
 true EI from the prior), runs one method, and records whether the interval holds the truth and the
-rank of the truth among the posterior draws. Replicates are seeded by index, so the result does not
-depend on the executor or the number of workers.
+rank of the truth among the posterior draws. Replicates are seeded by study seed, SNR level and index,
+so the result does not depend on the executor or the number of workers, the datasets of two SNR levels
+are independent, and all methods at one level see the same datasets (so each can be set beside the
+reference posterior of the very same data). Every record carries the code version that computed it
+(`bayespinn.codeversion`), and a resumed study refuses records of other code unless asked to mix.
 """
 
 from __future__ import annotations
@@ -14,6 +17,8 @@ import json
 import logging
 import os
 import time
+import zlib
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,8 +26,10 @@ import numpy as np
 from scipy import stats
 
 from .. import seeding
-from ..config import Config
+from ..codeversion import _module_digest, method_version
+from ..config import Config, snr_label
 from ..data.synthetic import simulate
+from ..errors import InputError
 from ..executor import Executor, task_resources
 from .methods import KEYS, RunOptions, infer
 
@@ -43,9 +50,25 @@ class Replicate:
     opts: RunOptions
 
 
+#: how replicate seeds are derived; files without it shared their datasets across SNR levels
+SEEDING = "seed/snr/index"
+
+
+def replicate_seed(seed: int, snr_db: float | None, index: int) -> np.random.SeedSequence:
+    """The seed of replicate `index` at `snr_db`: independent across levels and replicates."""
+    level = zlib.crc32(snr_label(snr_db).encode())
+    return seeding.child(seeding.child(seed, "coverage", level), "coverage", index)
+
+
+def coverage_version(method: str) -> str:
+    """Code version of a coverage record: the method's code, the simulator and this driver."""
+    h = hashlib.sha256(f"{method_version(method)}:{_module_digest(__name__)}".encode())
+    return h.hexdigest()[:12]
+
+
 def run_replicate(task: Replicate) -> dict:
     """Simulate one dataset, infer, and score the interval against the truth."""
-    seq = seeding.child(task.seed, "coverage", task.index)
+    seq = replicate_seed(task.seed, task.snr_db, task.index)
     cfg = task.cfg
     if task.truth == "prior":
         from .priors import EIPrior
@@ -66,15 +89,14 @@ def run_replicate(task: Replicate) -> dict:
         "rel_error_pct": float(100 * (d.mean() - true) / true),
         "sd_rel_pct": float(100 * d.std(ddof=1) / true),
         "converged": bool(post.diagnostics.get("converged", True)),
+        "code_version": coverage_version(task.method),
     }
 
 
 def clopper_pearson(k: int, n: int, conf: float = 0.95) -> tuple[float, float]:
-    """Exact binomial confidence interval for a proportion k/n."""
-    a = 1 - conf
-    lo = 0.0 if k == 0 else float(stats.beta.ppf(a / 2, k, n - k + 1))
-    hi = 1.0 if k == n else float(stats.beta.ppf(1 - a / 2, k + 1, n - k))
-    return lo, hi
+    """Exact (Clopper-Pearson) binomial confidence interval for a proportion k/n (scipy's binomtest)."""
+    ci = stats.binomtest(int(k), int(n)).proportion_ci(confidence_level=conf, method="exact")
+    return float(ci.low), float(ci.high)
 
 
 def binomial_acceptance(n: int, level: float, false_failure: float = 0.01) -> tuple[int, int]:
@@ -82,6 +104,24 @@ def binomial_acceptance(n: int, level: float, false_failure: float = 0.01) -> tu
     lo = int(stats.binom.ppf(false_failure / 2, n, level))
     hi = int(stats.binom.isf(false_failure / 2, n, level))
     return lo, hi
+
+
+#: the miscalibration each study states its power against: intervals that hold the truth this often
+POWER_AGAINST = 0.8
+
+
+def power(n: int, level: float, against: float = POWER_AGAINST, false_failure: float = 0.01) -> float:
+    """Probability that n replicates of a method whose intervals really cover `against` put its hits outside
+    the acceptance region of `level` (the chance the study notices that miscalibration)."""
+    lo, hi = binomial_acceptance(n, level, false_failure)
+    return float(stats.binom.cdf(lo - 1, n, against) + stats.binom.sf(hi, n, against))
+
+
+def verdict(hits: int, n: int, level: float, false_failure: float = 0.01) -> str:
+    """'consistent with 90 %' when the hits lie in the acceptance region, else 'not consistent with 90 %'."""
+    lo, hi = binomial_acceptance(n, level, false_failure)
+    pct = f"{100 * level:g} %"
+    return f"consistent with {pct}" if lo <= hits <= hi else f"not consistent with {pct}"
 
 
 def fingerprint(method: str, cfg: Config, snr_db, seed: int, level: float, truth: str, opts: RunOptions) -> str:
@@ -93,7 +133,7 @@ def fingerprint(method: str, cfg: Config, snr_db, seed: int, level: float, truth
         "method": method, "cfg": jsonable(dataclasses.asdict(cfg)), "snr_db": snr_db, "seed": seed, "level": level,
         "truth": truth, "profile": opts.profile, "members": opts.members, "device": opts.device,
         "noise_prior": opts.noise_prior, "mcmc": repr(opts.mcmc),
-        "bpinn_variant": opts.bpinn_variant,
+        "bpinn_variant": opts.bpinn_variant, "seeding": SEEDING,
     }
     return hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode()).hexdigest()[:16]
 
@@ -165,6 +205,7 @@ def coverage_study(
     progress: bool = True,
     checkpoint: str | Path | None = None,
     resume_from: str | Path | None = None,
+    mix_versions: bool = False,
 ) -> dict:
     """Run the study; returns the contract's coverage JSON (plus per-replicate records and the study's
     `fingerprint`).
@@ -173,6 +214,8 @@ def coverage_study(
         reuses them and runs only the rest (the caller removes it once the result is written)
     resume_from : a study file written earlier (this function's JSON); its replicates are reused when it is
         the same study (`earlier_records`), e.g. to run 30 replicates over two sessions
+    mix_versions : keep resumed replicates computed by other code than today's (recorded in the result's
+        `code_versions` and `mixed_versions`); without it such replicates are refused (InputError)
     """
     t0 = time.perf_counter()
     # the replicates are the parallel tasks: inside one, an ensemble's members train one after another in
@@ -187,11 +230,25 @@ def coverage_study(
     earlier = earlier_records(resume_from, key) if resume_from is not None else {}
     ck = Checkpoint(checkpoint, key, earlier) if checkpoint else None
     have = ck.done if ck else earlier
+    version = coverage_version(method)
+    other = sorted(i for i, r in have.items() if i < replicates and r.get("code_version") != version)
+    if other and not mix_versions:
+        src = " and ".join(str(p) for p in (resume_from, checkpoint) if p is not None)
+        raise InputError(
+            "--mix-versions", "off",
+            f"resumed replicates of today's code ({version}): {len(other)} of the {len(have)} in {src} were "
+            "computed by other code; pass --mix-versions to keep them (the study records it), or remove them "
+            "to start afresh",
+        )
+    if other:
+        log.warning("mixing code versions: %d resumed replicates were computed by other code than %s",
+                    len(other), version)
     tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in range(replicates) if i not in have]
     new = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress,
                                        resources=task_resources(opts.device if method != "modal" else "cpu"),
                                        on_result=(lambda i, r: ck.add(r)) if ck else None)
     recs = sorted([have[i] for i in range(replicates) if i in have] + new, key=lambda r: r["index"])
+    versions = Counter(str(r.get("code_version")) for r in recs)
     hits = int(sum(r["hit"] for r in recs))
     ranks = np.array([r["rank"] for r in recs])
     p = float(stats.kstest(ranks, "uniform").pvalue) if replicates > 1 else float("nan")
@@ -214,6 +271,12 @@ def coverage_study(
         "acceptance_99": list(binomial_acceptance(replicates, level)),
         "converged_fraction": float(np.mean([r["converged"] for r in recs])),
         "resumed_replicates": sum(1 for i in range(replicates) if i in have),
+        "code_version": version,
+        "code_versions": dict(versions),
+        "mixed_versions": len(versions) > 1,
+        "seeding": SEEDING,
+        "power_vs_80": power(replicates, level),
+        "verdict": verdict(hits, replicates, level),
         "fingerprint": key,
         "records": recs,
     }
@@ -233,7 +296,7 @@ def paired_with_reference(study: dict, reference: dict) -> dict | None:
     dataset was extreme, not that the method failed). Returns None when the studies do not share
     datasets.
     """
-    same = all(study.get(k) == reference.get(k) for k in ("seed", "snr_db", "case", "truth"))
+    same = all(study.get(k) == reference.get(k) for k in ("seed", "snr_db", "case", "truth", "seeding"))
     if not same or study.get("truth") != "fixed":
         return None
     ref = {r["index"]: r for r in reference["records"]}

@@ -1,0 +1,129 @@
+"""Which code produced a result: a fingerprint of the source a method's numbers depend on.
+
+A git commit names the whole tree, so it changes with every edit to a report or a README and says
+nothing about whether an old result still holds. `code_version(module)` instead hashes the syntax
+trees (docstrings dropped, so neither formatting nor documentation counts) of the module and of every
+bayespinn module it imports, transitively, including imports inside functions. Two results with the
+same code version were computed by the same code; a record whose version differs from today's was
+computed by code that has changed since, and is stale until it is re-run. Package `__init__` files
+hold re-exports only: their imports are followed, their own text is not hashed.
+"""
+
+from __future__ import annotations
+
+import ast
+import functools
+import hashlib
+from pathlib import Path
+
+PACKAGE = "bayespinn"
+ROOT = Path(__file__).resolve().parent
+
+#: the module of each method (CLI name), whose import closure decides that method's numbers
+METHOD_MODULES = {
+    "modal": "bayespinn.uq.modal_mcmc",
+    "ensemble": "bayespinn.uq.ensemble",
+    "bpinn": "bayespinn.uq.bpinn",
+}
+#: what every synthetic-data result depends on besides the method: the data simulator
+DATA_MODULES = ("bayespinn.data.synthetic",)
+
+
+def module_path(name: str) -> Path | None:
+    """The source file of a bayespinn module, or None when it is not one."""
+    if name != PACKAGE and not name.startswith(PACKAGE + "."):
+        return None
+    parts = name.split(".")[1:]
+    if not parts:
+        return ROOT / "__init__.py"
+    rel = Path(*parts)
+    for cand in (ROOT / rel.with_suffix(".py"), ROOT / rel / "__init__.py"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def _resolve(module: str, node: ast.ImportFrom) -> list[str]:
+    """Absolute module names an ImportFrom inside `module` may refer to."""
+    if node.level:
+        base = module.split(".")
+        is_pkg = module_path(module) is not None and module_path(module).name == "__init__.py"
+        base = base if is_pkg else base[:-1]
+        base = base[: len(base) - (node.level - 1)]
+        stem = ".".join(base + ([node.module] if node.module else []))
+    else:
+        stem = node.module or ""
+    # `from pkg import name` may import a submodule called name
+    return [stem] + [f"{stem}.{a.name}" for a in node.names]
+
+
+def imports_of(module: str) -> set[str]:
+    """The bayespinn modules that `module` imports anywhere in its source."""
+    path = module_path(module)
+    if path is None:
+        return set()
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            names = _resolve(module, node)
+        else:
+            continue
+        out.update(n for n in names if module_path(n) is not None)
+    return out
+
+
+def closure(*modules: str) -> list[str]:
+    """`modules` and every bayespinn module they import, transitively (sorted)."""
+    seen: set[str] = set()
+    todo = [m for m in modules if module_path(m) is not None]
+    while todo:
+        m = todo.pop()
+        if m in seen:
+            continue
+        seen.add(m)
+        # a submodule's package __init__ runs first
+        parent = m.rpartition(".")[0]
+        todo.extend(i for i in imports_of(m) | ({parent} if parent else set()) if i not in seen)
+    return sorted(seen)
+
+
+def _strip_docstrings(tree: ast.AST) -> ast.AST:
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                if isinstance(body[0].value.value, str):
+                    node.body = body[1:] or [ast.Pass()]
+    return tree
+
+
+@functools.cache
+def _module_digest(module: str) -> str:
+    path = module_path(module)
+    tree = _strip_docstrings(ast.parse(path.read_text(encoding="utf-8")))
+    return hashlib.sha256(ast.dump(tree, annotate_fields=False).encode()).hexdigest()
+
+
+def code_version(*modules: str) -> str:
+    """A 12-hex-digit fingerprint of the code of `modules` and everything they import."""
+    h = hashlib.sha256()
+    for m in closure(*modules):
+        if module_path(m).name == "__init__.py":
+            continue  # re-exports only: followed for their imports, not hashed
+        h.update(m.encode() + b"\0" + _module_digest(m).encode() + b"\n")
+    return h.hexdigest()[:12]
+
+
+def method_version(method: str, *extra: str) -> str:
+    """The code version of one method's results on synthetic data (CLI name: modal, ensemble, bpinn).
+
+    extra : further modules the result depends on (e.g. the coverage driver for a coverage record)
+    """
+    try:
+        mod = METHOD_MODULES[method]
+    except KeyError:
+        raise ValueError(f"no code version for method {method!r}; known: {', '.join(METHOD_MODULES)}") from None
+    return code_version(mod, *DATA_MODULES, *extra)
