@@ -11,6 +11,7 @@ from bayespinn.config import preset
 from bayespinn.data.synthetic import simulate
 from bayespinn.pinn import Problem, TrainSettings, fit
 from bayespinn.uq.bpinn import NUTSSettings, nuts
+from bayespinn.uq.nuts import nuts_health
 from bayespinn.uq.lastlayer import LastLayer
 from bayespinn.uq.methods import RunOptions, infer
 
@@ -246,13 +247,15 @@ def _ok(draws, mean, sd):
 def test_nuts_recovers_gaussian_and_negative_control():
     mean, sd = [0.3, -6.0], [0.02, 0.07]
     s = NUTSSettings(4, 200, 300)
-    draws = nuts(_Gauss(mean, sd), np.array(mean), np.diag(sd), s, seed=0, progress=False)
+    draws, runs = nuts(_Gauss(mean, sd), np.array(mean), np.diag(sd), s, seed=0, progress=False)
     assert draws.shape == (4, 300, 2) and _ok(draws, mean, sd)
+    health = nuts_health(runs)
+    assert health["divergences"] == 0 and health["tree_depth_saturated"] == 0 and not health["sampler_warnings"]
     # whitened with a factor 5 off in one direction and a shifted centre: the adaptation still finds it
-    off = nuts(_Gauss(mean, sd), np.array(mean) + [0.02, 0.0], np.diag([5 * sd[0], sd[1]]), s, seed=0,
-               progress=False)
+    off, _ = nuts(_Gauss(mean, sd), np.array(mean) + [0.02, 0.0], np.diag([5 * sd[0], sd[1]]), s, seed=0,
+                  progress=False)
     assert _ok(off, mean, sd)
-    wrong = nuts(_Gauss(mean, [0.04, 0.07]), np.array(mean), np.diag(sd), s, seed=0, progress=False)
+    wrong, _ = nuts(_Gauss(mean, [0.04, 0.07]), np.array(mean), np.diag(sd), s, seed=0, progress=False)
     assert not _ok(wrong, mean, sd)
 
 
@@ -294,20 +297,37 @@ def test_ensemble_without_data_is_not_identified():
 def test_ensemble_pooling_skips_members_without_a_local_width():
     from bayespinn.uq.ensemble import LAPLACE_DOF, pool_log_ei
 
-    log_ei = np.log([1.01e9, 1.027e9, 1.030e9, 1.005e9, 1.059e9])
-    lap = np.array([0.018, 0.010, 0.0105, 0.0137, 0.02])
+    assert LAPLACE_DOF == 4  # the hand-computed values below assume it
+    # members' log EI around 0 with deviations 0, +-0.02, +-0.01: sum of squares 0.001 over 4 dof -> 2.5e-4;
+    # every member's Laplace sd 0.01 -> variance 1e-4 with 4 dof; pooled (4 * 1e-4 + 0.001) / (4 + 4) = 1.75e-4
+    log_ei = np.array([0.0, 0.02, -0.02, 0.01, -0.01]) + np.log(1.03e9)
+    lap = np.full(5, 0.01)
     between, lap_var, nu, pooled = pool_log_ei(log_ei, lap, 0.5)
-    assert nu == LAPLACE_DOF and np.isclose(lap_var, np.mean(lap**2))
-    assert np.isclose(pooled, (nu * lap_var + 4 * between) / (nu + 4))
-    # member 4 without a peak: left out of the Laplace term, which then counts 4/5 of the dof
+    np.testing.assert_allclose([between, lap_var, nu, pooled], [2.5e-4, 1e-4, 4.0, 1.75e-4], rtol=1e-9)
+    # member 4 without a peak: the Laplace term rests on the other four (variance 1e-4) and counts 4/5 of its
+    # dof (3.2): pooled (3.2 * 1e-4 + 0.001) / 7.2 = 1.8333e-4
     lap_nan = lap.copy()
     lap_nan[4] = np.nan
     _, lv, nu2, pooled2 = pool_log_ei(log_ei, lap_nan, 0.5)
-    assert np.isclose(lv, np.mean(lap[:4] ** 2)) and np.isclose(nu2, 0.8 * LAPLACE_DOF)
-    assert np.isclose(pooled2, (nu2 * lv + 4 * between) / (nu2 + 4))
+    np.testing.assert_allclose([lv, nu2, pooled2], [1e-4, 3.2, 1.32e-3 / 7.2], rtol=1e-9)
     # negative control: the old rule (such a member at the prior's sd) blows the interval up ~10x
     lap_prior = lap.copy()
     lap_prior[4] = 0.5
     assert np.sqrt(pool_log_ei(log_ei, lap_prior, 0.5)[3]) > 5 * np.sqrt(pooled2)
     # one member without a width and no spread: the prior
     assert pool_log_ei(log_ei[:1], [np.nan], 0.5)[3] == 0.25
+
+
+def test_pooled_variance_is_unbiased_when_members_scatter_as_their_laplace_width_says():
+    """The property the pooling rests on: members i.i.d. N(mu, s^2), each with Laplace variance s^2, give a
+    pooled variance whose mean is s^2 (both terms are unbiased, so any weighting is; a wrong term is not)."""
+    from bayespinn.uq.ensemble import pool_log_ei
+
+    rng = np.random.default_rng(7)
+    s, n = 0.01, 4000
+    pooled = np.array([pool_log_ei(s * rng.standard_normal(5), np.full(5, s), 0.5)[3] for _ in range(n)])
+    # the between-member term alone has sd sqrt(2/4) s^2; the mean of n draws is within 4 standard errors
+    assert abs(pooled.mean() / s**2 - 1) < 4 * np.sqrt(0.5) / np.sqrt(n)
+    # negative control: members scattered 1.5x wider than their widths say are detected as biased
+    wide = np.array([pool_log_ei(1.5 * s * rng.standard_normal(5), np.full(5, s), 0.5)[3] for _ in range(n)])
+    assert abs(wide.mean() / s**2 - 1) > 4 * np.sqrt(0.5) / np.sqrt(n)

@@ -69,11 +69,13 @@ def alerts(summary: dict) -> list[Block]:
             )
         )
     for key, m in summary["methods"].items():
-        if (m.get("diagnostics") or {}).get("converged") is False:
+        d = m.get("diagnostics") or {}
+        if d.get("converged") is False:
+            why = "; ".join(d.get("problems") or []) or "R-hat or ESS"
             out.append(
                 Alert(
-                    f"{name(key)} did not meet its convergence criteria (R-hat, ESS): "
-                    "its intervals are approximate. See Diagnostics."
+                    f"{name(key)} did not meet its convergence criteria ({why}): "
+                    "its intervals are not to be trusted. See Diagnostics."
                 )
             )
     for key, m in summary["methods"].items():
@@ -296,10 +298,15 @@ def comparison_section(summary: dict) -> list[Block]:
     return out
 
 
+#: diagnostics with a column of their own
+_DIAG_COLUMNS = ("rhat", "ess_bulk", "ess_tail", "converged", "divergences", "tree_depth_saturated",
+                 "tree_depth_saturated_fraction", "max_tree_depth")
+
+
 def _other_diag(d: dict) -> str:
     parts = []
     for k, v in d.items():
-        if k in ("rhat", "ess_bulk", "ess_tail", "converged") or isinstance(v, dict | list):
+        if k in _DIAG_COLUMNS or isinstance(v, dict | list):
             continue
         parts.append(
             f"{k} = {fmt(v) if isinstance(v, int | float) and not isinstance(v, bool) else v}"
@@ -317,6 +324,9 @@ def diagnostics_section(summary: dict) -> list[Block]:
                 fmt(d.get("rhat"), ".4f"),
                 fmt(d.get("ess_bulk"), ".0f"),
                 fmt(d.get("ess_tail"), ".0f"),
+                str(d["divergences"]) if "divergences" in d else "n/a",
+                (f"{d['tree_depth_saturated']} (max depth {d.get('max_tree_depth')})"
+                 if "tree_depth_saturated" in d else "n/a"),
                 str(d.get("converged", "n/a")),
                 _other_diag(d),
             )
@@ -324,11 +334,20 @@ def diagnostics_section(summary: dict) -> list[Block]:
     out: list[Block] = [
         Heading("Diagnostics"),
         table(
-            ("method", "R-hat", "bulk ESS", "tail ESS", "converged", "other"),
+            ("method", "R-hat", "bulk ESS", "tail ESS", "divergences", "trajectories cut at max tree depth",
+             "converged", "other"),
             rows,
-            "R-hat and ESS from ArviZ (rank-normalised split R-hat); n/a where a method has none.",
+            "R-hat and ESS from ArviZ (rank-normalised split R-hat); divergences and tree depths from NUTS; "
+            "converged: R-hat <= 1.01, bulk and tail ESS >= 400, and (NUTS) no divergence and no trajectory "
+            "cut at the maximum depth. n/a where a method has none.",
         ),
     ]
+    for key, m in summary["methods"].items():
+        d = m.get("diagnostics") or {}
+        if d.get("problems"):
+            out.append(Paragraph(f"{name(key)} did not converge: {'; '.join(d['problems'])}."))
+        for w in d.get("sampler_warnings") or []:
+            out.append(Paragraph(f"{name(key)} sampler warning: {w}"))
     for key, m in summary["methods"].items():
         if m.get("variant"):
             out.append(Paragraph(f"{name(key)} variant: {m['variant']}."))

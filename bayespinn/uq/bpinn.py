@@ -5,7 +5,8 @@ analytically, see `lastlayer`): a deterministic PINN fit (the one training loop)
 features; the output weights get a Gaussian prior and are marginalised exactly; the data likelihood
 is Gaussian with unknown sigma; PDE, boundary and initial residuals enter as Gaussian pseudo-observations
 with stated scales. Pyro's NUTS samples the two remaining parameters through a `potential_fn` (no
-tracing per step), several chains from a dispersed start around the MAP, and ArviZ gives R-hat and ESS.
+tracing per step), several chains from a dispersed start around the MAP; ArviZ gives R-hat and ESS, and
+`nuts` the divergences, tree depths and warnings, all of which decide whether the run counts as converged.
 
 This is the fast default. `bpinn_full` samples every hidden weight too (the same model with the hidden
 layers free); `resolve_variant` picks it for the paper profile, `--bpinn-variant` chooses
@@ -28,9 +29,9 @@ from ..config import Config
 from ..data.measurements import Measurements
 from ..threads import torch_threads
 from .lastlayer import LastLayer
+from .nuts import nuts_health, problems, run_nuts
 from .posterior import Posterior, mcmc_diagnostics
 from .priors import EIPrior, NoisePrior
-from .sampler import ESS_MIN, RHAT_MAX
 
 log = logging.getLogger(__name__)
 
@@ -64,6 +65,7 @@ class NUTSSettings:
     chains: int = 4
     warmup: int = 300
     samples: int = 500
+    max_tree_depth: int = 10  # Pyro's and Stan's default: up to 1023 leapfrog steps per iteration
 
     @classmethod
     def for_profile(cls, profile: str) -> NUTSSettings:
@@ -148,27 +150,40 @@ class _Whitened:
         return self.pot({"z": self.z(params["u"])})
 
 
+#: dispersion of the chains' starts, in Laplace sds around the MAP, tried in turn until the potential is finite
+START_SCALES = (2.0, 1.0, 0.5, 0.25, 0.0)
+
+
+def valid_start(pot, direction: torch.Tensor, key: str = "u", **fixed) -> torch.Tensor:
+    """The first of `START_SCALES` * direction where the whitened potential is finite (a chain cannot start
+    where the density is zero or undefined, e.g. far out on an improper posterior's flank)."""
+    for k in START_SCALES:
+        u = k * direction
+        try:
+            with torch.no_grad():
+                ok = bool(torch.isfinite(pot({key: u, **fixed})))
+        except torch.linalg.LinAlgError:
+            ok = False
+        if ok:
+            return u
+    raise RuntimeError("the B-PINN posterior cannot be evaluated even at its MAP: the last-layer model is "
+                       "degenerate for these data")
+
+
 def nuts(pot: _Potential, z_map: np.ndarray, L: np.ndarray, s: NUTSSettings, seed, progress: bool):
     """Run `s.chains` NUTS chains (one after another, each on its own seed) on the whitened potential, each
-    from a dispersed start (2 Laplace sds around the MAP); draws of z (chain, draw, 2)."""
-    from pyro.infer import MCMC, NUTS
-
+    from a dispersed start (2 Laplace sds around the MAP); draws of z (chain, draw, 2) and the chains' runs
+    (sample statistics, warnings)."""
     wpot = _Whitened(pot, z_map, L)
-    out = []
+    out, runs = [], []
     for c in range(s.chains):
         cs = seeding.child(seed, "pyro", c)
-        r = np.random.default_rng(cs)
-        u0 = torch.tensor(2.0 * r.standard_normal(2), dtype=torch.float64)
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seeding.int_seed(cs))
-            kernel = NUTS(potential_fn=wpot, adapt_step_size=True, adapt_mass_matrix=True, full_mass=True)
-            mcmc = MCMC(kernel, num_samples=s.samples, warmup_steps=s.warmup, initial_params={"u": u0},
-                        disable_progbar=not progress)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                mcmc.run()
-            out.append(wpot.z_draws(mcmc.get_samples()["u"]))
-    return np.stack(out)
+        u0 = valid_start(wpot, torch.tensor(np.random.default_rng(cs).standard_normal(2), dtype=torch.float64))
+        run = run_nuts(wpot, {"u": u0}, warmup=s.warmup, samples=s.samples, seed=cs, full_mass=True,
+                       max_tree_depth=s.max_tree_depth, progress=progress)
+        out.append(wpot.z_draws(run.samples["u"]))
+        runs.append(run)
+    return np.stack(out), runs
 
 
 def bpinn_posterior(
@@ -214,10 +229,12 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
     log_ei = draws[:, :, 0] + shift
     EI, sigma = np.exp(log_ei), np.exp(draws[:, :, 1])
     diag = {**mcmc_diagnostics(EI), **diag}
-    converged = bool(diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN)
+    trouble = problems(diag)
+    converged = not trouble
     if not converged:
-        warnings.warn(f"B-PINN NUTS did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: "
-                      f"{ {k: diag[k] for k in ('rhat', 'ess_bulk', 'ess_tail')} }", RuntimeWarning, stacklevel=2)
+        msg = "B-PINN NUTS did not converge: " + "; ".join(trouble)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+        diag["problems"] = trouble
     ident = identified(log_ei.ravel(), ei_prior)
     diag.update(converged=converged, fit_EI=float(res.EI), fit_runtime_s=res.runtime_s, beta_factor=res.beta_factor)
     info = {"variant": name, "identified": ident}
@@ -255,8 +272,8 @@ def _sample_last_layer(res, problem, data, seed, opts, noise, settings, ei_prior
     _, ll, pot, z_map, L = last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift)
     log.info("[bpinn] NUTS: %s", VARIANT)
     s = NUTSSettings.for_profile(opts.profile)
-    draws = nuts(pot, z_map, L, s, seed, opts.progress)
-    diag = {"chains": s.chains, "warmup": s.warmup, "samples": s.samples,
+    draws, runs = nuts(pot, z_map, L, s, seed, opts.progress)
+    diag = {"chains": s.chains, "warmup": s.warmup, "samples": s.samples, **nuts_health(runs),
             "pseudo_sd": {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i},
             "first_mode": {"follows_EI": ll.first_mode_varies, "vibration_z2": ll.vibration_z2,
                            "threshold": ll.vibration_threshold}}

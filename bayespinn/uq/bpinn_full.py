@@ -43,7 +43,6 @@ from __future__ import annotations
 import logging
 import math
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -53,8 +52,9 @@ from torch import nn
 from .. import seeding
 from ..pinn.network import PINN
 from ..pinn.taylor import Jet
-from .bpinn import NUTSSettings, _Whitened
+from .bpinn import NUTSSettings, _Whitened, valid_start
 from .lastlayer import LastLayer
+from .nuts import nuts_health, run_nuts
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ PREDICTIVE_DRAWS = 100
 
 @dataclass(frozen=True)
 class FullHMCSettings(NUTSSettings):
-    """`bpinn.NUTSSettings` plus NUTS's maximum tree depth (a trajectory costs up to 2^depth - 1 gradients)."""
+    """`bpinn.NUTSSettings` with a lower maximum tree depth (a trajectory costs up to 2^depth - 1 gradients)."""
 
     max_tree_depth: int = 8
 
@@ -184,34 +184,24 @@ def full_nuts(pot: _FullPotential, s: FullHMCSettings, seed, progress: bool):
     """`s.chains` NUTS chains one after another, each from the fitted hidden weights and a dispersed
     (log theta, log sigma) (2 Laplace sds around the last-layer MAP), a diagonal mass matrix adapted in
     warm-up. Returns z draws (chain, draw, 2), a thinned set of hidden-weight draws (S, dim) with their z
-    (S, 2), and the divergent transitions per chain."""
-    from pyro.infer import MCMC, NUTS
-
+    (S, 2), and the chains' runs (sample statistics, warnings)."""
     dev = pot.fw.device
-    zs, hs, hz, div = [], [], [], []
+    zs, hs, hz, runs = [], [], [], []
     keep = max(1, math.ceil(PREDICTIVE_DRAWS / s.chains))
     for c in range(s.chains):
         cs = seeding.child(seed, "pyro-full", c)
-        r = np.random.default_rng(cs)
-        u0 = torch.tensor(2.0 * r.standard_normal(2), dtype=torch.float64, device=dev)
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seeding.int_seed(cs))
-            kernel = NUTS(potential_fn=pot, adapt_step_size=True, adapt_mass_matrix=True, full_mass=False,
-                          max_tree_depth=s.max_tree_depth)
-            mcmc = MCMC(kernel, num_samples=s.samples, warmup_steps=s.warmup,
-                        initial_params={"v": pot.v_fit(), "u": u0}, disable_progbar=not progress)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                mcmc.run()
-        smp = mcmc.get_samples()
+        d = torch.tensor(np.random.default_rng(cs).standard_normal(2), dtype=torch.float64, device=dev)
+        u0 = valid_start(pot, d, v=pot.v_fit())
+        run = run_nuts(pot, {"v": pot.v_fit(), "u": u0}, warmup=s.warmup, samples=s.samples, seed=cs,
+                       full_mass=False, max_tree_depth=s.max_tree_depth, progress=progress)
+        smp = run.samples
         z = pot.zw.z_draws(smp["u"])
         zs.append(z)
         idx = np.linspace(0, s.samples - 1, min(keep, s.samples)).round().astype(int)
         hs.append(pot.h(smp["v"].detach()[idx]).cpu())
         hz.append(z[idx])
-        d = mcmc.diagnostics().get("divergences", {})
-        div.append(int(sum(len(v) for v in d.values())) if isinstance(d, dict) else 0)
-    return np.stack(zs), torch.cat(hs), np.concatenate(hz), div
+        runs.append(run)
+    return np.stack(zs), torch.cat(hs), np.concatenate(hz), runs
 
 
 def sample_full(start, seed, opts, shift):
@@ -230,9 +220,9 @@ def sample_full(start, seed, opts, shift):
     log.info("[bpinn] NUTS: %s; %d hidden weights; one gradient %.3g s, so %d iterations take between %.3g s "
              "and %.3g s (max tree depth %d)", FULL_VARIANT, fw.dim, g, n_iter, n_iter * g,
              n_iter * g * (2**s.max_tree_depth - 1), s.max_tree_depth)
-    draws, h_draws, hz, div = full_nuts(pot, s, seed, opts.progress)
-    diag = {"chains": s.chains, "warmup": s.warmup, "samples": s.samples, "max_tree_depth": s.max_tree_depth,
-            "divergences": div, "hidden_weights": fw.dim, "hidden_prior_sd": HIDDEN_PRIOR_SD,
+    draws, h_draws, hz, runs = full_nuts(pot, s, seed, opts.progress)
+    diag = {"chains": s.chains, "warmup": s.warmup, "samples": s.samples, **nuts_health(runs),
+            "hidden_weights": fw.dim, "hidden_prior_sd": HIDDEN_PRIOR_SD,
             "gradient_s": g, "pseudo_sd": {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i},
             "first_mode": {"follows_EI": False, "vibration_z2": ll.vibration_z2, "threshold": ll.vibration_threshold}}
     pred = FullWeightPredictor(fw, h_draws, hz[:, 0], hz[:, 1], shift)

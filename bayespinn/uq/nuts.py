@@ -1,0 +1,162 @@
+"""Pyro's NUTS on a potential function, with the sampler's own account of what went wrong.
+
+`run_nuts` runs one chain and returns its draws together with per-draw sample statistics:
+`diverging` (the trajectory hit a divergence), `tree_depth` (doublings of the trajectory), `step_size`
+and `lp` (minus the potential). Pyro records divergences but not tree depths; the depth is recovered
+from the number of gradient evaluations of the iteration (a trajectory of depth d takes up to 2^d - 1
+leapfrog steps, one gradient each). Warnings raised while sampling are kept and logged, never silenced.
+
+`nuts_health` turns the statistics of all chains into the diagnostics a run reports, and `healthy`
+says whether they allow calling the run converged (R-hat, bulk and tail ESS, no divergence, no
+trajectory cut at the maximum tree depth).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from .. import seeding
+from .sampler import ESS_MIN, RHAT_MAX
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class ChainRun:
+    """One NUTS chain: draws per site (draw, ...) and per-draw sample statistics (draw,)."""
+
+    samples: dict[str, torch.Tensor]
+    lp: np.ndarray
+    diverging: np.ndarray
+    tree_depth: np.ndarray
+    step_size: np.ndarray
+    max_tree_depth: int
+    warnings: list[str] = field(default_factory=list)
+    nonfinite: int = 0  # potential evaluations that were not finite (treated as outside the support)
+
+
+class _Counted:
+    """A potential function that counts its calls (one per leapfrog step) and treats a point where the
+    potential is not finite or cannot be computed (an unbounded or undefined density, e.g. near an improper
+    posterior's pole, where a Cholesky factor fails in float64) as outside the support: +inf, which NUTS rejects and reports as a divergence, where a -inf or NaN would
+    crash Pyro's tree building."""
+
+    def __init__(self, fn: Callable):
+        self.fn, self.calls, self.nonfinite = fn, 0, 0
+
+    def __call__(self, params):
+        self.calls += 1
+        try:
+            pe = self.fn(params)
+        except torch.linalg.LinAlgError:  # e.g. a covariance no longer positive definite in float64
+            pe = None
+        if pe is not None and bool(torch.isfinite(pe)):
+            return pe
+        self.nonfinite += 1
+        anchor = sum((v * 0).sum() for v in params.values())  # keeps the graph: a zero gradient
+        return anchor + float("inf")
+
+
+def run_nuts(
+    potential_fn: Callable[[dict], torch.Tensor],
+    initial_params: dict[str, torch.Tensor],
+    *,
+    warmup: int,
+    samples: int,
+    seed: np.random.SeedSequence,
+    full_mass: bool = True,
+    max_tree_depth: int = 10,
+    progress: bool = False,
+) -> ChainRun:
+    """One NUTS chain on `potential_fn` (step size and mass matrix adapted in warm-up), a function of the seed."""
+    from pyro.infer import MCMC, NUTS
+
+    pot = _Counted(potential_fn)
+    stats: dict[str, list] = {"lp": [], "diverging": [], "tree_depth": [], "step_size": []}
+    state = {"calls": 0, "div": 0}
+
+    def hook(kernel, params, stage, i):
+        n = pot.calls - state["calls"]
+        state["calls"] = pot.calls
+        if stage != "Sample":
+            return
+        ndiv = len(kernel._divergences)
+        stats["diverging"].append(ndiv > state["div"])
+        state["div"] = ndiv
+        stats["tree_depth"].append(max(1, math.ceil(math.log2(n + 1))) if n > 0 else 0)
+        stats["step_size"].append(float(kernel.step_size))
+        pe = kernel._potential_energy_last
+        stats["lp"].append(-float(pe) if pe is not None else float("nan"))
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seeding.int_seed(seed))
+        kernel = NUTS(potential_fn=pot, adapt_step_size=True, adapt_mass_matrix=True, full_mass=full_mass,
+                      max_tree_depth=max_tree_depth)
+        mcmc = MCMC(kernel, num_samples=samples, warmup_steps=warmup, initial_params=initial_params,
+                    disable_progbar=not progress, hook_fn=hook)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            mcmc.run()
+    msgs = list(dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught))
+    for m in msgs:
+        log.warning("[nuts] %s", m)
+    return ChainRun(
+        samples={k: v.detach() for k, v in mcmc.get_samples().items()},
+        lp=np.asarray(stats["lp"], float),
+        diverging=np.asarray(stats["diverging"], bool),
+        tree_depth=np.asarray(stats["tree_depth"], int),
+        step_size=np.asarray(stats["step_size"], float),
+        max_tree_depth=max_tree_depth,
+        warnings=msgs,
+        nonfinite=pot.nonfinite,
+    )
+
+
+def sample_stats(chains: list[ChainRun]) -> dict[str, np.ndarray]:
+    """The chains' statistics stacked (chain, draw), as ArviZ's `sample_stats` group names them."""
+    return {k: np.stack([getattr(c, k) for c in chains]) for k in ("lp", "diverging", "tree_depth", "step_size")}
+
+
+def nuts_health(chains: list[ChainRun]) -> dict:
+    """Divergences, trajectories cut at the maximum tree depth, and the sampler's warnings, over all chains."""
+    div = [int(c.diverging.sum()) for c in chains]
+    sat = [int((c.tree_depth >= c.max_tree_depth).sum()) for c in chains]
+    n = sum(c.diverging.size for c in chains)
+    return {
+        "divergences": int(sum(div)),
+        "divergences_per_chain": div,
+        "max_tree_depth": chains[0].max_tree_depth if chains else None,
+        "tree_depth_saturated": int(sum(sat)),
+        "tree_depth_saturated_fraction": float(sum(sat) / n) if n else 0.0,
+        "mean_tree_depth": float(np.mean([c.tree_depth.mean() for c in chains])) if n else float("nan"),
+        "step_size": [float(c.step_size[-1]) if c.step_size.size else float("nan") for c in chains],
+        "sampler_warnings": list(dict.fromkeys(m for c in chains for m in c.warnings)),
+        "nonfinite_potential": int(sum(c.nonfinite for c in chains)),
+    }
+
+
+def problems(diag: dict) -> list[str]:
+    """What keeps a sampler's run from counting as converged, in words (empty when nothing does): R-hat above
+    1.01, bulk or tail ESS below 400 (Vehtari et al. 2021), any divergent transition, or any trajectory cut at
+    the maximum tree depth (the sampler did not explore the posterior as NUTS promises)."""
+    out = []
+    rhat, bulk, tail = diag.get("rhat"), diag.get("ess_bulk"), diag.get("ess_tail")
+    if rhat is None or not math.isfinite(rhat) or rhat > RHAT_MAX:
+        out.append(f"R-hat {rhat:.3g} > {RHAT_MAX}" if rhat is not None and math.isfinite(rhat) else "R-hat n/a")
+    for name, v in (("bulk", bulk), ("tail", tail)):
+        if v is None or not math.isfinite(v) or v < ESS_MIN:
+            out.append(f"{name} ESS {v:.0f} < {ESS_MIN:.0f}" if v is not None and math.isfinite(v)
+                       else f"{name} ESS n/a")
+    if diag.get("divergences"):
+        out.append(f"{diag['divergences']} divergent transitions")
+    if diag.get("tree_depth_saturated"):
+        out.append(f"{diag['tree_depth_saturated']} trajectories cut at the maximum tree depth "
+                   f"{diag.get('max_tree_depth')}")
+    return out
