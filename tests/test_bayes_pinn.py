@@ -11,9 +11,9 @@ from bayespinn.config import preset
 from bayespinn.data.synthetic import simulate
 from bayespinn.pinn import Problem, TrainSettings, fit
 from bayespinn.uq.bpinn import NUTSSettings, nuts
-from bayespinn.uq.nuts import nuts_health
 from bayespinn.uq.lastlayer import LastLayer
 from bayespinn.uq.methods import RunOptions, infer
+from bayespinn.uq.nuts import nuts_health
 
 #: float64 Cholesky vs dense log-determinant on ~100-row systems
 EXACT_TOL = 1e-6
