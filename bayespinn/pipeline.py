@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .codeversion import method_version
 from .config import Config
 from .data.measurements import Measurements, read_csv
 from .data.synthetic import realised_snr, sigma_for_snr, simulate
@@ -50,6 +51,28 @@ def versions() -> dict:
         except metadata.PackageNotFoundError:
             out[pkg] = None
     return out
+
+
+def machine(device: str = "cpu") -> dict:
+    """Where a result was computed: cores, CPU model, torch threads, device, platform."""
+    import os
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.lower().startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    try:
+        import torch
+
+        threads = int(torch.get_num_threads())
+    except Exception:  # noqa: BLE001 - never lose a manifest for it
+        threads = None
+    return {"cpus": os.cpu_count(), "cpu_model": cpu, "torch_threads": threads, "device": device,
+            "platform": platform.platform()}
 
 
 def git_commit() -> str | None:
@@ -152,6 +175,9 @@ def run(
     }
     if data_path is None and snr_db is not None:
         summary["realised_snr_db"] = realised_snr(data.value, data.value_true)
+    agree = agreement_entries(summary["methods"])
+    if agree:
+        summary["agreement"] = agree
     timings["total_s"] = time.perf_counter() - t_start
     manifest = {
         "schema": "bayespinn.manifest/1",
@@ -166,8 +192,11 @@ def run(
             "bpinn_variant": opts.bpinn_variant,
         },
         "device": opts.device,
+        "machine": machine(opts.device),
         "versions": versions(),
         "git_commit": git_commit(),
+        # the code each method's numbers come from (`codeversion`): a record is stale once these change
+        "code_versions": {KEYS[m]: method_version(m) for m in methods},
         "timings_s": timings,
     }
     result = RunResult(data, truth, posts, summary, manifest)
@@ -182,6 +211,24 @@ def run(
         _write_json(stage / "manifest.json", manifest)
         _write_json(stage / "summary.json", summary)
     return result
+
+
+def agreement_entries(methods: dict) -> dict:
+    """Each PINN posterior against the modal reference of the same data: EI mean difference and sigma mean
+    difference in reference sds, the sd ratio, and the verdict (`report.agreement`)."""
+    from .report.agreement import agreement
+
+    out = {}
+    ref = methods.get("modal_mcmc")
+    for v in agreement(methods):
+        if v.agrees is None:
+            continue
+        entry = {"mean_diff_sd": v.mean_diff_sd, "sd_ratio": v.sd_ratio, "agrees": v.agrees}
+        s, rs = methods[v.method].get("sigma", {}), ref.get("sigma", {})
+        if rs.get("sd"):
+            entry["sigma_diff_sd"] = (s["mean"] - rs["mean"]) / rs["sd"]
+        out[v.method] = entry
+    return out
 
 
 def _write_json(path: Path, obj: dict) -> None:

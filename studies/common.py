@@ -14,7 +14,6 @@ import json
 import logging
 import math
 import os
-import platform
 import subprocess
 import sys
 import warnings
@@ -26,7 +25,8 @@ from bayespinn.config import parse_snr, snr_label
 from bayespinn.data.measurements import atomic_write_text
 from bayespinn.errors import InputError
 from bayespinn.executor import cpu_count
-from bayespinn.pipeline import git_commit, versions
+from bayespinn.codeversion import method_version
+from bayespinn.pipeline import git_commit, machine, versions
 from bayespinn.uq.methods import KEYS, RunOptions
 from bayespinn.uq.posterior import jsonable
 
@@ -120,16 +120,6 @@ def entry(main: Callable[[list[str] | None], int]) -> None:
 
 
 # ------------------------------------------------------------------------------------- provenance
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def _git_dirty() -> bool | None:
     try:
         r = subprocess.run(
@@ -160,12 +150,6 @@ def command_line(script: str, argv: list[str]) -> str:
 
 def provenance(script: str, argv: list[str], args, **extra) -> dict:
     """Who made these rows: command, profile, seed, date, machine, versions."""
-    try:
-        import torch
-
-        threads = int(torch.get_num_threads())
-    except Exception:  # noqa: BLE001 - torch is a dependency, but never lose a table for it
-        threads = None
     device = resolve_device(args.device)
     out = {
         "command": command_line(script, argv),
@@ -174,18 +158,14 @@ def provenance(script: str, argv: list[str], args, **extra) -> dict:
         "members": args.members,
         "noise_prior": args.noise_prior,
         "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-        "machine": {
-            "cpus": cpu_count(),
-            "cpu_model": _cpu_model(),
-            "torch_threads": threads,
-            "device": device,
-            "platform": platform.platform(),
-        },
+        "machine": {**machine(device), "cpus": cpu_count()},
         "versions": versions(),
         "git_commit": git_commit(),
         "git_dirty": _git_dirty(),
     }
     out.update(extra)
+    if "methods" in extra:
+        out["code_versions"] = code_versions(extra["methods"])
     return out
 
 
@@ -223,6 +203,42 @@ def _show(v) -> str:
     if v is None:
         return "clean"
     return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def code_versions(method_keys: Iterable[str]) -> dict[str, str]:
+    """Today's code version of each method (summary keys), as a run's provenance records it."""
+    cli = {v: k for k, v in KEYS.items()}
+    return {k: method_version(cli[k]) for k in method_keys if k in cli}
+
+
+def run_is_fresh(prov: dict, method_key: str) -> bool:
+    """Were this run's rows of `method_key` computed by today's code of that method?"""
+    recorded = (prov.get("code_versions") or {}).get(method_key)
+    return recorded is not None and recorded == code_versions([method_key]).get(method_key)
+
+
+def run_cell(doc: dict, row: dict) -> str:
+    """The `run` column of a table row: the run's label, marked stale when the row's method has changed
+    since (or the run predates code versions)."""
+    label = run_label(doc["runs"], row["run"])
+    return label if run_is_fresh(doc["runs"][row["run"]], row["method"]) else f"{label} (**stale**)"
+
+
+def stale_notice(doc: dict) -> list:
+    """A paragraph under a table when some of its rows were computed by code that has changed since."""
+    from bayespinn.report.document import Paragraph
+
+    stale = [r for r in doc["rows"] if not run_is_fresh(doc["runs"][r["run"]], r["method"])]
+    if not stale:
+        return []
+    return [
+        Paragraph(
+            f"**Stale rows** ({len(stale)} of {len(doc['rows'])}, marked in the `run` column): computed by code "
+            "that has changed since, or before code versions were recorded (`bayespinn.codeversion`); "
+            "they are kept as the last measurement, not re-run with today's code yet. Re-running the command "
+            "of their run refreshes them."
+        )
+    ]
 
 
 def run_label(runs: dict, rid: str) -> str:

@@ -27,13 +27,23 @@ from dataclasses import replace
 from pathlib import Path
 
 import common as c
+import numpy as np
 
 from bayespinn.config import preset, snr_label
 from bayespinn.errors import InputError
 from bayespinn.executor import Executor
-from bayespinn.report.document import Alert, BulletList, Heading, Paragraph, table
+from bayespinn.report.document import Alert, BulletList, Figure, Heading, Paragraph, table
 from bayespinn.report.units import fmt_pct, name
-from bayespinn.uq.coverage import binomial_acceptance, coverage_study, paired_with_reference
+from bayespinn.uq.coverage import (
+    POWER_AGAINST,
+    SEEDING,
+    binomial_acceptance,
+    coverage_study,
+    coverage_version,
+    paired_with_reference,
+    power,
+    verdict,
+)
 
 log = logging.getLogger("studies.coverage")
 
@@ -43,6 +53,27 @@ LEVELS = "10,30"
 REPLICATES = {"modal": 200, "ensemble": 30, "bpinn": 20}
 #: false-failure rate of the acceptance region
 FALSE_FAILURE = 0.01
+#: the rank ECDF figure: simultaneous band probability
+ECDF_BAND = 0.99
+CLI_NAME = {"modal_mcmc": "modal", "ensemble": "ensemble", "bpinn": "bpinn"}
+
+
+def freshness(row: dict) -> str:
+    """'today's code', or why the row is stale: the code version its replicates were computed by against
+    today's (`coverage_version`), and whether its datasets are the older ones shared across SNR levels."""
+    today = coverage_version(CLI_NAME[row["method"]])
+    versions = row.get("code_versions") or {}
+    if row.get("code_version") is None:
+        return "**stale**: predates code versions; not re-run with today's code yet"
+    if set(versions) == {today}:
+        return "today's code"
+    if today in versions:
+        return f"**mixed**: {versions[today]} of {row['replicates']} replicates by today's code"
+    return f"**stale**: computed by code {row['code_version']}, today's is {today}; not re-run yet"
+
+
+def datasets(row: dict) -> str:
+    return "independent" if row.get("seeding") == SEEDING else "paired across SNR (older seeding)"
 
 
 def replicates_of(text: str | None, methods: list[str]) -> dict[str, int]:
@@ -89,6 +120,7 @@ def blocks(doc: dict) -> list:
                 )
             )
         conv = r.get("converged_fraction")
+        v = verdict(r["hits"], r["replicates"], r["level"], FALSE_FAILURE)
         body.append(
             (
                 name(r["method"]),
@@ -98,7 +130,8 @@ def blocks(doc: dict) -> list:
                 f"{r['coverage']:.3f}",
                 f"[{r['coverage_ci95'][0]:.3f}, {r['coverage_ci95'][1]:.3f}]",
                 f"[{lo}, {hi}]",
-                "yes" if ok else "**no**",
+                v if ok else f"**{v}**",
+                f"{power(r['replicates'], r['level'], POWER_AGAINST, FALSE_FAILURE):.2f}",
                 "n/a" if r["rank_uniformity_p"] is None else f"{r['rank_uniformity_p']:.3f}",
                 fmt_pct(r["mean_rel_error_pct"]),
                 f"{r['mean_sd_rel_pct']:.3f} %",
@@ -106,19 +139,29 @@ def blocks(doc: dict) -> list:
                 f"{r['runtime_s']:.0f}"
                 + (f" (+{r['resumed_replicates']} replicates resumed from an earlier run)"
                    if r.get("resumed_replicates") else ""),
+                datasets(r),
+                freshness(r),
                 c.run_label(doc["runs"], r["run"]),
             )
         )
     out = [
         Heading("Coverage of the true EI by the credible intervals", 1),
         Paragraph(
-            "Deflection case (case study 1). For each method and SNR: independent synthetic datasets (fresh "
-            "random sample points and noise per replicate, the true EI fixed); 'hits': replicates whose "
-            "central interval contains the true EI. A calibrated method's hits follow Binomial(n, level); the "
-            f"acceptance region holds them with probability {100 * (1 - FALSE_FAILURE):.0f} %. Coverage CI: "
-            "exact (Clopper-Pearson) 95 %. Rank uniformity: Kolmogorov-Smirnov p value of the truth's rank "
-            "among the posterior draws (small p: the posterior is biased or mis-sized even if the hits pass). "
-            "Mean sd: the posterior sd of EI relative to the truth, averaged."
+            "Deflection case (case study 1). For each method and SNR: synthetic datasets (fresh random sample "
+            "points and noise per replicate, the true EI fixed); 'hits': replicates whose central interval "
+            "contains the true EI. A calibrated method's hits follow Binomial(n, level); the acceptance region "
+            f"holds them with probability {100 * (1 - FALSE_FAILURE):.0f} %, and the verdict says whether the "
+            "hits are consistent with the nominal level (not that the method is calibrated: a few dozen "
+            f"replicates cannot show that). Power: the probability that a method whose intervals hold the "
+            f"truth only {100 * POWER_AGAINST:.0f} % of the time falls outside the region at this replicate "
+            "count. Coverage CI: exact (Clopper-Pearson) 95 %, from scipy. Rank uniformity: Kolmogorov-Smirnov "
+            "p value of the truth's rank among the posterior draws (small p: the posterior is biased or "
+            "mis-sized even if the hits pass). Mean sd: the posterior sd of EI relative to the truth, "
+            "averaged. Datasets: 'independent' rows draw their replicates from the seed, the SNR and the "
+            "index, so two SNR rows are two experiments; 'paired' rows (older seeding) reused the same sample "
+            "points and standard-normal draws at every SNR, so such rows are one experiment seen twice and "
+            "must not be pooled. Code: whether the replicates were computed by today's code (the code "
+            "version of the method, the simulator and the coverage driver, `bayespinn.codeversion`)."
         ),
         *alerts,
         table(
@@ -130,12 +173,15 @@ def blocks(doc: dict) -> list:
                 "coverage",
                 "coverage 95 % CI",
                 "99 % acceptance (hits)",
-                "calibrated",
+                "verdict",
+                f"power vs {100 * POWER_AGAINST:.0f} %",
                 "rank-uniformity p",
                 "mean rel. error",
                 "mean sd / EI",
                 "converged",
                 "runtime (s)",
+                "datasets",
+                "code",
                 "run",
             ),
             body,
@@ -147,6 +193,17 @@ def blocks(doc: dict) -> list:
             Paragraph(
                 "The modal reference runs each replicate with the coverage sampler settings of "
                 "`MCMCSettings.for_coverage()` (the same for every profile)."
+            )
+        )
+    if doc.get("rank_figure"):
+        out.append(
+            Figure(
+                "Ranks of the true EI among the posterior draws",
+                doc["rank_figure"],
+                "ECDF of the truth's rank minus the uniform CDF, per study, with the simultaneous "
+                f"{100 * ECDF_BAND:.0f} % band of a calibrated posterior (ArviZ `plot_ecdf`). A curve leaving the "
+                "band: the posterior is biased (an S-shape tilted to one side) or mis-sized (a hump: too "
+                "wide; a trough: too narrow).",
             )
         )
     out += paired_blocks(doc)
@@ -231,9 +288,72 @@ def paired_blocks(doc: dict) -> list:
     ]
 
 
-def write_page(doc: dict, out: Path) -> None:
-    """coverage.json and coverage.md of the table doc, with the paired comparisons brought up to date."""
+def rank_figure(doc: dict, out: Path) -> str | None:
+    """coverage_ranks.png: one ECDF-difference panel per study with its simultaneous band; the path relative
+    to `out`, or None when no study file is there."""
+    import warnings
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import arviz as az
+    import matplotlib.pyplot as plt
+    from scipy import stats
+
+    studies = []
+    for r in doc["rows"]:
+        f = out / r["file"] if r.get("file") else None
+        if f is not None and f.exists():
+            recs = json.loads(f.read_text(encoding="utf-8"))["records"]
+            studies.append((r, np.array([q["rank"] for q in recs])))
+    if not studies:
+        return None
+    n = len(studies)
+    cols = min(n, 3)
+    rows = int(np.ceil(n / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
+    grid = np.linspace(0.0, 1.0, 101)  # evaluation points independent of the ranks
+    for ax, (r, ranks) in zip(axes.ravel(), studies, strict=False):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            az.plot_ecdf(ranks, cdf=stats.uniform(0, 1).cdf, difference=True, confidence_bands="optimized",
+                         ci_prob=ECDF_BAND, eval_points=grid, random_state=0, ax=ax)
+        ax.set_title(f"{name(r['method'])}, {c.snr_text(r['snr_db'])} (n = {ranks.size})", fontsize=9)
+        ax.set_xlabel("rank of the true EI")
+        ax.axhline(0.0, color="0.6", lw=0.6)
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    axes[0, 0].set_ylabel("ECDF - uniform")
+    fig.tight_layout()
+    path = out / "coverage_ranks.png"
+    tmp = path.with_name(".coverage_ranks.tmp.png")
+    fig.savefig(tmp, dpi=90)
+    plt.close(fig)
+    tmp.replace(path)
+    return path.name
+
+
+def refresh(doc: dict, out: Path, figure: bool = True) -> None:
+    """Bring the doc's derived entries up to date: paired comparisons, each row's verdict, power, datasets
+    and freshness, and (with `figure`) the rank figure."""
     add_paired(doc, out)
+    for r in doc["rows"]:
+        r["verdict"] = verdict(r["hits"], r["replicates"], r["level"], FALSE_FAILURE)
+        r["power_vs_80"] = power(r["replicates"], r["level"], POWER_AGAINST, FALSE_FAILURE)
+        r["code"] = freshness(r).replace("**", "")
+        r["datasets"] = datasets(r)
+        r["acceptance_probability"] = 1 - FALSE_FAILURE
+        r["power_against"] = POWER_AGAINST
+    if figure:
+        doc["rank_figure"] = rank_figure(doc, out)
+    elif (out / "coverage_ranks.png").exists():
+        doc["rank_figure"] = "coverage_ranks.png"
+
+
+def write_page(doc: dict, out: Path) -> None:
+    """coverage.json, coverage.md and the rank figure of the table doc, with the paired comparisons and each
+    row's verdict, power and freshness brought up to date."""
+    refresh(doc, out)
     c.write_json(out / "coverage.json", doc)
     c.write_markdown(out / "coverage.md", blocks(doc))
     log.info("wrote %s and %s", out / "coverage.md", out / "coverage.json")

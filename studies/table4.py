@@ -116,7 +116,7 @@ def blocks(doc: dict) -> list:
                 verdicts[c.snr_key(r["snr_db"])].get(
                     r["method"], "reference" if r["method"] == "modal_mcmc" else "n/a"
                 ),
-                c.run_label(doc["runs"], r["run"]),
+                c.run_cell(doc, r),
             )
         )
     out = [
@@ -165,6 +165,7 @@ def blocks(doc: dict) -> list:
         )
     )
     out += c.not_run_yet(doc)
+    out += c.stale_notice(doc)
     out += [
         Heading("Files"),
         BulletList(

@@ -207,7 +207,7 @@ def blocks(doc: dict) -> list:
         body = []
         for r in rows:
             for cells in table5_rows(r["table5"]):
-                body.append((name(r["method"]), *cells, c.run_label(doc["runs"], r["run"])))
+                body.append((name(r["method"]), *cells, c.run_cell(doc, r)))
         body += paper_rows(snr)
         out += [Heading(c.snr_text(snr)), table(("method", *HEADER, "run"), body)]
         notes = []
@@ -224,6 +224,7 @@ def blocks(doc: dict) -> list:
             )
         out.append(BulletList(tuple(notes)))
     out += c.not_run_yet(doc)
+    out += c.stale_notice(doc)
     out += [
         Heading("Provenance"),
         BulletList(tuple(c.provenance_lines(doc["runs"], list(doc["runs"])))),

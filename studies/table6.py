@@ -190,7 +190,7 @@ def blocks(doc: dict) -> list:
                     "n/a",
                     c.kN(p["EI"]),
                     f"{p['rel_error_pct']:.2f} %",
-                    c.run_label(doc["runs"], r["run"]),
+                    c.run_cell(doc, r),
                 )
             )
             continue
@@ -213,7 +213,7 @@ def blocks(doc: dict) -> list:
                 ident,
                 c.kN(p["EI"]),
                 f"{p['rel_error_pct']:.2f} %",
-                c.run_label(doc["runs"], r["run"]),
+                c.run_cell(doc, r),
             )
         )
     for r in doc["rows"]:
@@ -253,6 +253,7 @@ def blocks(doc: dict) -> list:
         )
     )
     out += c.not_run_yet(doc)
+    out += c.stale_notice(doc)
     out += [
         Heading("Files"),
         BulletList(

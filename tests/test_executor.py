@@ -211,3 +211,42 @@ def test_ray_tasks_ask_for_a_gpu_share_only_when_training_on_cuda():
     assert task_resources("cpu") == {"num_cpus": 1} == task_resources(None)
     assert task_resources("cuda") == {"num_cpus": 1, "num_gpus": GPU_FRACTION}
     assert task_resources("cuda:1")["num_gpus"] == GPU_FRACTION
+
+
+def test_coverage_resume_refuses_other_code_unless_asked(tmp_path, monkeypatch):
+    """Replicates computed by other code (another code version) are not mixed into a study silently: the
+    resume raises InputError naming --mix-versions; asked to mix, the study records both versions."""
+    import json
+
+    from bayespinn.errors import InputError
+
+    def run(n, **kw):
+        return coverage_study("modal", preset(), 10.0, replicates=n, seed=3, opts=SMALL, progress=False,
+                              executor=Executor("local", workers=1), **kw)
+
+    first = tmp_path / "first.json"
+    doc = run(2)
+    assert doc["code_versions"] == {doc["code_version"]: 2} and doc["mixed_versions"] is False
+    doc["records"][0]["code_version"] = "0123456789ab"  # as if computed before a change to the method
+    first.write_text(json.dumps(doc), encoding="utf-8")
+    with pytest.raises(InputError, match="--mix-versions"):
+        run(3, resume_from=first)
+    mixed = run(3, resume_from=first, mix_versions=True)
+    assert mixed["mixed_versions"] is True and mixed["resumed_replicates"] == 2
+    assert mixed["code_versions"] == {"0123456789ab": 1, mixed["code_version"]: 2}
+
+
+def test_coverage_datasets_are_independent_across_snr_and_shared_across_methods():
+    """Replicate i at 10 dB and at 30 dB draws different points and noise; two methods at one level see the
+    same dataset (the pairing of each PINN posterior with the reference rests on it)."""
+    import numpy as np
+
+    from bayespinn.data.synthetic import simulate
+    from bayespinn.uq.coverage import replicate_seed
+
+    cfg = preset()
+    a, b = (simulate(cfg, s, replicate_seed(0, s, 5)) for s in (10.0, 30.0))
+    assert not np.allclose(a.x, b.x) and not np.allclose(a.t, b.t)
+    again = simulate(cfg, 10.0, replicate_seed(0, 10.0, 5))
+    np.testing.assert_array_equal(a.value, again.value)
+    assert not np.allclose(simulate(cfg, 10.0, replicate_seed(0, 10.0, 6)).x, a.x)

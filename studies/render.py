@@ -1,0 +1,62 @@
+"""Re-render the committed study pages from their JSON with today's code, running nothing.
+
+Each page marks the rows that today's code would compute differently (stale: their code version is not
+today's, see `bayespinn.codeversion`), so after a change to the science the pages are re-rendered with
+this script and say which rows need re-running; `tests/test_records.py` fails while a committed page
+differs from what this script would write.
+
+    python studies/render.py --out reports/paper
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+if str(HERE) not in sys.path:  # the study modules import each other by name, as scripts do
+    sys.path.insert(0, str(HERE))
+
+import common as c  # noqa: E402
+
+log = logging.getLogger("studies.render")
+
+def page_text(name: str, out: Path) -> str | None:
+    """The markdown today's code renders for <out>/<name>.json (None when the JSON is not there)."""
+    from bayespinn.report.markdown import render_markdown
+
+    mod = importlib.import_module(name)
+    path = out / f"{name}.json"
+    if not path.exists():
+        return None
+    doc = c.load_table(path, mod.SCHEMA)
+    if name == "coverage":
+        mod.refresh(doc, out, figure=False)
+    return render_markdown(mod.blocks(doc))
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="reports/paper", help="folder of the study pages (default reports/paper)")
+    args = p.parse_args(sys.argv[1:] if argv is None else argv)
+    c.setup_logging(False)
+    out = Path(args.out)
+    for name in ("coverage", "table4", "table5", "table6"):
+        path = out / f"{name}.json"
+        if not path.exists():
+            continue
+        mod = importlib.import_module(name)
+        doc = c.load_table(path, mod.SCHEMA)
+        if name == "coverage":
+            mod.write_page(doc, out)
+        else:
+            c.write_markdown(out / f"{name}.md", mod.blocks(doc))
+        log.info("rendered %s", out / f"{name}.md")
+    return 0
+
+
+if __name__ == "__main__":
+    c.entry(main)
