@@ -92,7 +92,8 @@ def test_a_potential_that_cannot_be_evaluated_is_outside_the_support():
 @pytest.fixture(scope="module")
 def struggling_run(tmp_path_factory):
     """The B-PINN on two deflection points: with the vague noise prior its posterior has no floor in sigma
-    (two points, dozens of output weights: the marginal likelihood grows without bound as sigma -> 0)."""
+    (two points, dozens of output weights: the marginal likelihood grows without bound as sigma -> 0).
+    Slow (about 5 minutes): the trajectories that run to the maximum depth cost 1023 gradients each."""
     from bayespinn.cli import main
 
     tmp = tmp_path_factory.mktemp("struggle")
@@ -104,6 +105,7 @@ def struggling_run(tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_a_struggling_bpinn_says_so_in_summary_and_report(struggling_run):
     d = json.loads((struggling_run / "summary.json").read_text())["methods"]["bpinn"]["diagnostics"]
     assert d["converged"] is False

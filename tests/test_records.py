@@ -4,6 +4,8 @@
   reports/), and every number in the bullet is found in the records it cites, at the precision shown
   (as a value, as a percentage of a fraction, or in a recorded command). A negative control plants a
   number that no record holds and expects it to be flagged.
+- A bullet that quotes a record computed by code that has changed since (its code versions are not
+  today's) must say "stale".
 - Study pages: each committed page under reports/paper is exactly what today's code renders from its
   committed JSON (`studies/render.py`). A page whose rows were computed by code that has changed since
   then says so row by row (stale), and this test fails until the page is re-rendered to say it.
@@ -105,6 +107,25 @@ def unbacked(bullet: str) -> list[str]:
     return [tok for tok in NUMBER.findall(text) if not backed(tok, vals)]
 
 
+def record_is_fresh(path: str) -> bool | None:
+    """Was the record computed by today's code? None for records that carry no code version (table JSON)."""
+    from bayespinn.codeversion import method_version
+    from bayespinn.uq.coverage import coverage_version
+
+    cli = {"modal_mcmc": "modal", "ensemble": "ensemble", "bpinn": "bpinn"}
+    p = ROOT / path
+    doc = json.loads(p.read_text(encoding="utf-8"))
+    if doc.get("schema") == "bayespinn.coverage/1":
+        return set(doc.get("code_versions") or {}) == {coverage_version(cli[doc["method"]])}
+    if p.name in ("summary.json", "manifest.json"):
+        man = json.loads((p.parent / "manifest.json").read_text(encoding="utf-8"))
+        recorded = man.get("code_versions")
+        if not recorded:
+            return False
+        return all(v == method_version(cli[k]) for k, v in recorded.items())
+    return None
+
+
 def test_every_status_number_names_a_record():
     bullets = status_bullets(README.read_text(encoding="utf-8"))
     assert len(bullets) >= 3
@@ -116,6 +137,9 @@ def test_every_status_number_names_a_record():
         bad = unbacked(b)
         if bad:
             problems[b[:60]] = f"numbers without a record: {bad}"
+        stale = [p for p in RECORD.findall(b) if record_is_fresh(p) is False]
+        if stale and "stale" not in b:
+            problems[b[:60]] = f"quotes records computed by code that has changed since, without saying so: {stale}"
     assert not problems, json.dumps(problems, indent=1)
 
 
