@@ -11,4 +11,14 @@ from .data.measurements import Measurements, read_csv  # noqa: E402
 from .data.synthetic import simulate  # noqa: E402
 from .uq.posterior import Posterior  # noqa: E402
 
-__all__ = ["Beam", "Config", "Measurements", "Posterior", "Vehicle", "preset", "read_csv", "resolve", "simulate"]
+__all__ = [
+    "Beam",
+    "Config",
+    "Measurements",
+    "Posterior",
+    "Vehicle",
+    "preset",
+    "read_csv",
+    "resolve",
+    "simulate",
+]

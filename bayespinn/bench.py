@@ -15,7 +15,9 @@ log = logging.getLogger(__name__)
 BENCH_BATCH = 32
 
 
-def bench_modal(n_points: int = 100, n_modes: int = 10, batch: int = BENCH_BATCH, seconds: float = 2.0) -> dict:
+def bench_modal(
+    n_points: int = 100, n_modes: int = 10, batch: int = BENCH_BATCH, seconds: float = 2.0
+) -> dict:
     """Gaussian log-likelihood evaluations per second of the modal surrogate, one EI value per evaluation,
     `batch` EI values per vectorised call (as emcee calls it)."""
     from .physics.modal import ModalModel

@@ -41,10 +41,16 @@ def _int(name: str, minimum: int):
 
 def parse_methods(text: str, single: bool = False) -> list[str]:
     """'all' or a comma list of modal, ensemble, bpinn -> ordered list of method names."""
-    names = ["modal", "ensemble", "bpinn"] if text.strip() == "all" else [m.strip() for m in text.split(",")]
+    names = (
+        ["modal", "ensemble", "bpinn"]
+        if text.strip() == "all"
+        else [m.strip() for m in text.split(",")]
+    )
     for m in names:
         if m not in METHOD_KEYS:
-            raise InputError("--method", text, "modal, ensemble, bpinn, all, or a comma list of them")
+            raise InputError(
+                "--method", text, "modal, ensemble, bpinn, all, or a comma list of them"
+            )
     if single and len(names) != 1:
         raise InputError("--method", text, "exactly one of modal, ensemble, bpinn")
     return [m for m in ("modal", "ensemble", "bpinn") if m in names]
@@ -63,30 +69,49 @@ def parse_level(text: str) -> float:
 def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True) -> None:
     if snr:
         p.add_argument("--snr", help="'clean' or a finite SNR in dB (> 0)")
-    p.add_argument("--case", default="deflection", help="deflection (case study 1) or strain (case study 2)")
+    p.add_argument(
+        "--case", default="deflection", help="deflection (case study 1) or strain (case study 2)"
+    )
     if method:
-        p.add_argument("--method", default="all", help="modal, ensemble, bpinn, all, or a comma list")
-    p.add_argument("--members", type=_int("--members", 1), default=5, help="ensemble size (default 5)")
+        p.add_argument(
+            "--method", default="all", help="modal, ensemble, bpinn, all, or a comma list"
+        )
+    p.add_argument(
+        "--members", type=_int("--members", 1), default=5, help="ensemble size (default 5)"
+    )
     p.add_argument("--profile", default="fast", help="smoke, fast (default) or paper")
     p.add_argument("--config", help="TOML file overriding the Exeter preset")
     p.add_argument("--seed", type=_int("--seed", 0), default=0, help="root seed (default 0)")
     p.add_argument("--device", default="auto", help="auto, cpu or cuda")
     p.add_argument("--executor", default="local", help="local (process pool) or ray")
-    p.add_argument("--address", default=None, help="Ray cluster address (with --executor ray), or 'auto'")
-    p.add_argument("--workers", type=_int("--workers", 1), default=None, help="local worker processes")
+    p.add_argument(
+        "--address", default=None, help="Ray cluster address (with --executor ray), or 'auto'"
+    )
+    p.add_argument(
+        "--workers", type=_int("--workers", 1), default=None, help="local worker processes"
+    )
     p.add_argument("--noise-prior", dest="noise_prior", default="vague", help="vague or snr")
-    p.add_argument("--bpinn-variant", dest="bpinn_variant", default="auto",
-                   help="B-PINN sampler: last-layer, full (every hidden weight), or auto (default: full for "
-                        "--profile paper, else last-layer)")
+    p.add_argument(
+        "--bpinn-variant",
+        dest="bpinn_variant",
+        default="auto",
+        help="B-PINN sampler: last-layer, full (every hidden weight), or auto (default: full for "
+        "--profile paper, else last-layer)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(prog="bayespinn", description="Girder stiffness (EI) from moving-load measurements, with honest uncertainty.")
+    p = _Parser(
+        prog="bayespinn",
+        description="Girder stiffness (EI) from moving-load measurements, with honest uncertainty.",
+    )
     p.add_argument("--version", action="version", version=f"bayespinn {__version__}")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
 
-    r = sub.add_parser("run", help="simulate (or load) data, run the UQ methods, write a report folder")
+    r = sub.add_parser(
+        "run", help="simulate (or load) data, run the UQ methods, write a report folder"
+    )
     _common(r)
     r.add_argument("--data", help="a measurement CSV instead of synthetic data")
     r.add_argument("--out", help="output folder (default reports/runs/<case>-snr<S>-seed<seed>)")
@@ -95,18 +120,34 @@ def build_parser() -> argparse.ArgumentParser:
     _common(s)
     s.add_argument("--out", help="output folder (default reports/sweeps/<case>-seed<seed>)")
 
-    c = sub.add_parser("coverage", help="posterior-coverage study over independent synthetic datasets")
+    c = sub.add_parser(
+        "coverage", help="posterior-coverage study over independent synthetic datasets"
+    )
     _common(c)
     c.add_argument("--replicates", type=_int("--replicates", 1), default=100)
     c.add_argument("--level", type=parse_level, default=0.9)
-    c.add_argument("--truth", default="fixed", help="fixed (the config's EI) or prior (draw EI per replicate: SBC)")
-    c.add_argument("--out", help="coverage JSON file (default reports/coverage/<method>-snr<S>-seed<seed>.json)")
-    c.add_argument("--resume", action="store_true",
-                   help="reuse the replicates of the --out file already there when it is the same study "
-                        "(same method, configuration, SNR, seed, level and options)")
-    c.add_argument("--mix-versions", dest="mix_versions", action="store_true",
-                   help="keep resumed replicates computed by other code than today's (recorded in the study); "
-                        "without it they are refused")
+    c.add_argument(
+        "--truth",
+        default="fixed",
+        help="fixed (the config's EI) or prior (draw EI per replicate: SBC)",
+    )
+    c.add_argument(
+        "--out",
+        help="coverage JSON file (default reports/coverage/<method>-snr<S>-seed<seed>.json)",
+    )
+    c.add_argument(
+        "--resume",
+        action="store_true",
+        help="reuse the replicates of the --out file already there when it is the same study "
+        "(same method, configuration, SNR, seed, level and options)",
+    )
+    c.add_argument(
+        "--mix-versions",
+        dest="mix_versions",
+        action="store_true",
+        help="keep resumed replicates computed by other code than today's (recorded in the study); "
+        "without it they are refused",
+    )
 
     m = sub.add_parser("simulate", help="write a synthetic measurement CSV")
     _common(m, method=False)
@@ -130,7 +171,9 @@ def resolve_device(name: str) -> str:
 
     has = torch.cuda.is_available()
     if name == "cuda" and not has:
-        raise InputError("--device", name, "a machine with a CUDA GPU (none is visible here); use cpu or auto")
+        raise InputError(
+            "--device", name, "a machine with a CUDA GPU (none is visible here); use cpu or auto"
+        )
     return "cuda" if has else "cpu"
 
 
@@ -153,7 +196,9 @@ def _cmd_simulate(args) -> int:
     from .data.synthetic import simulate
 
     if args.snr is None:
-        raise InputError("--snr", None, "'clean' or a finite number of dB > 0 (required for simulate)")
+        raise InputError(
+            "--snr", None, "'clean' or a finite number of dB > 0 (required for simulate)"
+        )
     snr = parse_snr(args.snr)
     if not args.out:
         raise InputError("--out", None, "the path of the CSV file to write")
@@ -161,7 +206,9 @@ def _cmd_simulate(args) -> int:
     data = simulate(cfg, snr, args.seed)
     data.to_csv(args.out)
     if not args.quiet:
-        log.info("wrote %d %s samples at SNR %s to %s", len(data), cfg.case, snr_label(snr), args.out)
+        log.info(
+            "wrote %d %s samples at SNR %s to %s", len(data), cfg.case, snr_label(snr), args.out
+        )
     return 0
 
 

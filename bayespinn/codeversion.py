@@ -125,5 +125,7 @@ def method_version(method: str, *extra: str) -> str:
     try:
         mod = METHOD_MODULES[method]
     except KeyError:
-        raise ValueError(f"no code version for method {method!r}; known: {', '.join(METHOD_MODULES)}") from None
+        raise ValueError(
+            f"no code version for method {method!r}; known: {', '.join(METHOD_MODULES)}"
+        ) from None
     return code_version(mod, *DATA_MODULES, *extra)

@@ -34,16 +34,22 @@ def cmd_run(args) -> int:
     from .pipeline import run
 
     if args.data is None and args.snr is None:
-        raise InputError("--snr", None, "'clean' or a finite number of dB > 0 (or give --data FILE.csv)")
+        raise InputError(
+            "--snr", None, "'clean' or a finite number of dB > 0 (or give --data FILE.csv)"
+        )
     snr = parse_snr(args.snr) if args.snr is not None else None
     cfg = _config(args)
     methods = parse_methods(args.method)
     opts = _opts(args, snr)
     if args.noise_prior == "snr" and (args.data is not None or snr is None):
         if args.snr is None:
-            raise InputError("--noise-prior", "snr", "a nominal --snr in dB to centre the noise prior on")
+            raise InputError(
+                "--noise-prior", "snr", "a nominal --snr in dB to centre the noise prior on"
+            )
     out = Path(args.out) if args.out else default_out(args)
-    res = run(cfg, methods=methods, snr_db=snr, seed=args.seed, data_path=args.data, out=out, opts=opts)
+    res = run(
+        cfg, methods=methods, snr_db=snr, seed=args.seed, data_path=args.data, out=out, opts=opts
+    )
     log.info("wrote %s", out)
     for k, m in res.summary["methods"].items():
         e = m["EI"]
@@ -57,29 +63,56 @@ def cmd_coverage(args) -> int:
     from .uq.posterior import jsonable
 
     if args.snr is None:
-        raise InputError("--snr", None, "'clean' or a finite number of dB > 0 (required for coverage)")
+        raise InputError(
+            "--snr", None, "'clean' or a finite number of dB > 0 (required for coverage)"
+        )
     snr = parse_snr(args.snr)
     if snr is None:
-        raise InputError("--snr", args.snr, "a finite number of dB > 0 (clean data have no noise to cover)")
+        raise InputError(
+            "--snr", args.snr, "a finite number of dB > 0 (clean data have no noise to cover)"
+        )
     if args.truth not in ("fixed", "prior"):
         raise InputError("--truth", args.truth, "fixed or prior")
     cfg = _config(args)
     method = parse_methods(args.method if args.method != "all" else "modal", single=True)[0]
     opts = _opts(args, snr)
-    out = Path(args.out) if args.out else Path("reports") / "coverage" / f"{method}-{args.case}-snr{args.snr}-seed{args.seed}.json"
+    out = (
+        Path(args.out)
+        if args.out
+        else Path("reports")
+        / "coverage"
+        / f"{method}-{args.case}-snr{args.snr}-seed{args.seed}.json"
+    )
     # finished replicates survive an interruption here; the same command resumes from them
     partial = out.with_name(out.name + ".partial.jsonl")
     res = coverage_study(
-        method, cfg, snr, replicates=args.replicates, level=args.level, seed=args.seed, truth=args.truth,
-        opts=replace(opts, executor=None), executor=opts.executor, progress=not args.quiet, checkpoint=partial,
-        resume_from=out if args.resume else None, mix_versions=args.mix_versions,
+        method,
+        cfg,
+        snr,
+        replicates=args.replicates,
+        level=args.level,
+        seed=args.seed,
+        truth=args.truth,
+        opts=replace(opts, executor=None),
+        executor=opts.executor,
+        progress=not args.quiet,
+        checkpoint=partial,
+        resume_from=out if args.resume else None,
+        mix_versions=args.mix_versions,
     )
     atomic_write_text(out, json.dumps(jsonable(res), indent=2) + "\n")
     partial.unlink(missing_ok=True)
     log.info(
         "%s coverage at %s dB: %d / %d = %.3f (95%% CI [%.3f, %.3f]), rank-uniformity p = %.3f, %.1f s -> %s",
-        res["method"], args.snr, res["hits"], res["replicates"], res["coverage"], *res["coverage_ci95"],
-        res["rank_uniformity_p"], res["runtime_s"], out,
+        res["method"],
+        args.snr,
+        res["hits"],
+        res["replicates"],
+        res["coverage"],
+        *res["coverage_ci95"],
+        res["rank_uniformity_p"],
+        res["runtime_s"],
+        out,
     )
     return 0
 
@@ -93,7 +126,9 @@ def cmd_sweep(args) -> int:
     cfg = _config(args)
     methods = parse_methods(args.method)
     opts = _opts(args, None)
-    out = Path(args.out) if args.out else Path("reports") / "sweeps" / f"{args.case}-seed{args.seed}"
+    out = (
+        Path(args.out) if args.out else Path("reports") / "sweeps" / f"{args.case}-seed{args.seed}"
+    )
     sweep(cfg, levels=levels, methods=methods, seed=args.seed, out=out, opts=opts)
     log.info("wrote %s", out)
     return 0

@@ -70,7 +70,9 @@ class Beam:
 
     def __post_init__(self) -> None:
         for name in ("length", "EI", "mass_per_length", "section_depth"):
-            object.__setattr__(self, name, _check_number(f"beam.{name}", getattr(self, name), positive=True))
+            object.__setattr__(
+                self, name, _check_number(f"beam.{name}", getattr(self, name), positive=True)
+            )
         z = _check_number("beam.damping_ratio", self.damping_ratio, nonneg=True)
         if z >= 1:
             raise InputError("beam.damping_ratio", self.damping_ratio, "a number in [0, 1)")
@@ -90,8 +92,12 @@ class Axle:
     offset: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "load", _check_number("vehicle.axles.load", self.load, positive=True))
-        object.__setattr__(self, "offset", _check_number("vehicle.axles.offset", self.offset, nonneg=True))
+        object.__setattr__(
+            self, "load", _check_number("vehicle.axles.load", self.load, positive=True)
+        )
+        object.__setattr__(
+            self, "offset", _check_number("vehicle.axles.offset", self.offset, nonneg=True)
+        )
 
 
 @dataclass(frozen=True)
@@ -168,8 +174,12 @@ class PriorSpec:
     EI_log_sd: float = 0.5
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "EI_median", _check_number("prior.EI_median", self.EI_median, positive=True))
-        object.__setattr__(self, "EI_log_sd", _check_number("prior.EI_log_sd", self.EI_log_sd, positive=True))
+        object.__setattr__(
+            self, "EI_median", _check_number("prior.EI_median", self.EI_median, positive=True)
+        )
+        object.__setattr__(
+            self, "EI_log_sd", _check_number("prior.EI_log_sd", self.EI_log_sd, positive=True)
+        )
 
 
 @dataclass(frozen=True)
@@ -187,7 +197,9 @@ class Config:
             raise InputError("--case", self.case, "one of " + ", ".join(CASES))
         for s in self.sensors:
             if not 0.0 <= s.x <= self.beam.length:
-                raise InputError(f"data.sensors {s.name}.x", s.x, f"a position in [0, {self.beam.length}] m")
+                raise InputError(
+                    f"data.sensors {s.name}.x", s.x, f"a position in [0, {self.beam.length}] m"
+                )
 
     @property
     def duration(self) -> float:
@@ -228,7 +240,10 @@ class Config:
 def truck_vehicle(speed: float = EXETER_SPEED, share: float = EAST_GIRDER_SHARE) -> Vehicle:
     """The paper's four-axle test truck, the girder's share of each axle."""
     offsets = np.concatenate([[0.0], np.cumsum(TRUCK_SPACINGS)])
-    return Vehicle(speed, tuple(Axle(share * p, float(o)) for p, o in zip(TRUCK_AXLE_LOADS, offsets, strict=True)))
+    return Vehicle(
+        speed,
+        tuple(Axle(share * p, float(o)) for p, o in zip(TRUCK_AXLE_LOADS, offsets, strict=True)),
+    )
 
 
 def preset(case: str = "deflection") -> Config:
@@ -254,7 +269,9 @@ def _table(doc: dict, name: str) -> dict:
     unknown = set(t) - _SECTIONS[name]
     if unknown:
         key = sorted(unknown)[0]
-        raise InputError(f"{name}.{key}", t[key], "one of the keys " + ", ".join(sorted(_SECTIONS[name])))
+        raise InputError(
+            f"{name}.{key}", t[key], "one of the keys " + ", ".join(sorted(_SECTIONS[name]))
+        )
     return t
 
 
@@ -267,7 +284,9 @@ def _build(cls, name: str, base, values: dict):
 
 def _axles(raw: Any) -> tuple[Axle, ...]:
     if not isinstance(raw, list) or not raw:
-        raise InputError("vehicle.axles", raw, "a non-empty list of { load = N, offset = m } tables")
+        raise InputError(
+            "vehicle.axles", raw, "a non-empty list of { load = N, offset = m } tables"
+        )
     out = []
     for i, a in enumerate(raw):
         if not isinstance(a, dict) or "load" not in a or set(a) - {"load", "offset"}:
@@ -276,7 +295,9 @@ def _axles(raw: Any) -> tuple[Axle, ...]:
         off = _check_number(f"vehicle.axles[{i}].offset", a.get("offset", 0.0), nonneg=True)
         out.append(Axle(load, off))
     if min(a.offset for a in out) != 0.0:
-        raise InputError("vehicle.axles", raw, "the first axle at offset 0 (offsets are behind the first axle)")
+        raise InputError(
+            "vehicle.axles", raw, "the first axle at offset 0 (offsets are behind the first axle)"
+        )
     return tuple(out)
 
 
@@ -288,8 +309,11 @@ def _sensors(raw: Any) -> tuple[Sensor, ...]:
         if not isinstance(s, dict) or set(s) != {"name", "x", "y"}:
             raise InputError(f"data.sensors[{i}]", s, "a table { name = 'S1', x = m, y = m }")
         out.append(
-            Sensor(str(s["name"]), _check_number(f"data.sensors[{i}].x", s["x"]),
-                   _check_number(f"data.sensors[{i}].y", s["y"]))
+            Sensor(
+                str(s["name"]),
+                _check_number(f"data.sensors[{i}].x", s["x"]),
+                _check_number(f"data.sensors[{i}].y", s["y"]),
+            )
         )
     return tuple(out)
 
@@ -302,7 +326,9 @@ def load_toml(path: str | Path) -> dict:
     except FileNotFoundError:
         raise InputError("--config", str(path), "an existing TOML file") from None
     except (OSError, UnicodeDecodeError) as exc:
-        raise InputError("--config", str(path), f"a readable UTF-8 TOML file ({exc.__class__.__name__})") from None
+        raise InputError(
+            "--config", str(path), f"a readable UTF-8 TOML file ({exc.__class__.__name__})"
+        ) from None
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

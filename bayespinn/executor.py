@@ -111,7 +111,9 @@ class Executor:
         fn = _OneThread(fn)
         done = on_result or (lambda i, r: None)
         if self.kind == "ray":
-            return _ray_map(fn, tasks, self.address, resources or {"num_cpus": 1}, desc, progress, done)
+            return _ray_map(
+                fn, tasks, self.address, resources or {"num_cpus": 1}, desc, progress, done
+            )
         n = min(self.workers or cpu_count(), len(tasks)) if tasks else 1
         bar = _bar(len(tasks), desc, progress)
         if n <= 1:
@@ -145,15 +147,29 @@ def _bar(total: int, desc: str, progress: bool):
     return tqdm(total=total, desc=desc, unit="task", disable=not progress, leave=False)
 
 
-def _ray_map(fn: Callable, tasks: list, address: str | None, resources: dict, desc: str, progress: bool,
-             on_result: Callable[[int, object], None]) -> list:
+def _ray_map(
+    fn: Callable,
+    tasks: list,
+    address: str | None,
+    resources: dict,
+    desc: str,
+    progress: bool,
+    on_result: Callable[[int, object], None],
+) -> list:
     try:
         import ray
     except ImportError:
-        raise InputError("--executor", "ray", "Ray installed (pip install 'bayespinn[ray]')") from None
+        raise InputError(
+            "--executor", "ray", "Ray installed (pip install 'bayespinn[ray]')"
+        ) from None
     if not ray.is_initialized():
         try:
-            ray.init(address=address, ignore_reinit_error=True, log_to_driver=False, include_dashboard=False)
+            ray.init(
+                address=address,
+                ignore_reinit_error=True,
+                log_to_driver=False,
+                include_dashboard=False,
+            )
         except (ConnectionError, ValueError) as exc:
             raise InputError("--address", address, f"a reachable Ray cluster ({exc})") from None
 

@@ -71,14 +71,23 @@ def machine(device: str = "cpu") -> dict:
         threads = int(torch.get_num_threads())
     except Exception:  # noqa: BLE001 - never lose a manifest for it
         threads = None
-    return {"cpus": os.cpu_count(), "cpu_model": cpu, "torch_threads": threads, "device": device,
-            "platform": platform.platform()}
+    return {
+        "cpus": os.cpu_count(),
+        "cpu_model": cpu,
+        "torch_threads": threads,
+        "device": device,
+        "platform": platform.platform(),
+    }
 
 
 def git_commit() -> str | None:
     try:
         r = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True, timeout=5
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(__file__).parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
         )
         return r.stdout.strip() or None if r.returncode == 0 else None
     except (OSError, subprocess.SubprocessError):
@@ -98,14 +107,18 @@ def unit_warnings(data: Measurements) -> list[str]:
     return out
 
 
-def load_data(cfg: Config, data_path: str | None, snr_db: float | None, seed: int) -> tuple[Measurements, dict | None]:
+def load_data(
+    cfg: Config, data_path: str | None, snr_db: float | None, seed: int
+) -> tuple[Measurements, dict | None]:
     """Measured data (truth None) or synthetic data at snr_db (truth: EI and sigma)."""
     if data_path is not None:
         data = read_csv(data_path, cfg.beam.length)
         cases = set(data.kind.tolist())
         if cfg.case not in cases and len(cases) == 1:
             cfg_case = next(iter(cases))
-            raise InputError("--case", cfg.case, f"'{cfg_case}' to match the kind of the rows in {data_path}")
+            raise InputError(
+                "--case", cfg.case, f"'{cfg_case}' to match the kind of the rows in {data_path}"
+            )
         return data, None
     data = simulate(cfg, snr_db, seed)
     sigma = sigma_for_snr(data.value_true, snr_db)
@@ -162,7 +175,12 @@ def run(
         s = p.summary(truth)["EI"]
         log.info(
             "[%s] EI = %.4g N m^2 (sd %.3g, 90%% [%.4g, %.4g]) in %.1f s",
-            KEYS[m], s["mean"], s["sd"], s["ci90"][0], s["ci90"][1], p.runtime_s,
+            KEYS[m],
+            s["mean"],
+            s["sd"],
+            s["ci90"][0],
+            s["ci90"][1],
+            p.runtime_s,
         )
     summary = {
         "schema": "bayespinn.summary/1",
@@ -185,10 +203,15 @@ def run(
         "config": cfg.to_dict(),
         "seed": seed,
         "snr_db": summary["snr_db"],
-        "data": str(data_path) if data_path else "synthetic (finite-element reference, point loads)",
+        "data": str(data_path)
+        if data_path
+        else "synthetic (finite-element reference, point loads)",
         "methods": list(posts),
         "options": {
-            "profile": opts.profile, "members": opts.members, "noise_prior": opts.noise_prior, "device": opts.device,
+            "profile": opts.profile,
+            "members": opts.members,
+            "noise_prior": opts.noise_prior,
+            "device": opts.device,
             "bpinn_variant": opts.bpinn_variant,
         },
         "device": opts.device,

@@ -11,7 +11,17 @@ import zlib
 
 import numpy as np
 
-STREAMS = ("points", "noise", "emcee", "collocation", "ensemble", "pyro", "coverage", "init", "pyro-full")
+STREAMS = (
+    "points",
+    "noise",
+    "emcee",
+    "collocation",
+    "ensemble",
+    "pyro",
+    "coverage",
+    "init",
+    "pyro-full",
+)
 
 
 def stream(seed: int | np.random.SeedSequence, name: str) -> np.random.SeedSequence:

@@ -36,11 +36,19 @@ class Level:
 
 def run_level(task: Level) -> RunResult:
     log.info("sweep: SNR %s", snr_label(task.snr_db))
-    return run(task.cfg, methods=list(task.methods), snr_db=task.snr_db, seed=task.seed, out=task.out,
-               opts=task.opts)
+    return run(
+        task.cfg,
+        methods=list(task.methods),
+        snr_db=task.snr_db,
+        seed=task.seed,
+        out=task.out,
+        opts=task.opts,
+    )
 
 
-def sweep(cfg: Config, *, levels: list, methods: list[str], seed: int, out: Path, opts: RunOptions) -> dict:
+def sweep(
+    cfg: Config, *, levels: list, methods: list[str], seed: int, out: Path, opts: RunOptions
+) -> dict:
     """Run every level into out/snr<level>/ (levels spread over `opts.executor`), then write sweep.json and
     the combined reports."""
     from .executor import Executor, task_resources
@@ -48,11 +56,20 @@ def sweep(cfg: Config, *, levels: list, methods: list[str], seed: int, out: Path
     out = Path(out)
     executor = opts.executor or Executor()
     inner = replace(opts, executor=Executor("local", workers=1), progress=False)
-    tasks = [Level(cfg, snr, tuple(methods), seed, out / f"snr{snr_label(snr)}", inner) for snr in levels]
-    results = executor.map(run_level, tasks, desc="sweep levels", progress=opts.progress,
-                           resources=task_resources(opts.device))
-    entries = [{"snr_db": t.snr_db, "folder": t.out.name, "methods": r.summary["methods"]}
-               for t, r in zip(tasks, results, strict=True)]
+    tasks = [
+        Level(cfg, snr, tuple(methods), seed, out / f"snr{snr_label(snr)}", inner) for snr in levels
+    ]
+    results = executor.map(
+        run_level,
+        tasks,
+        desc="sweep levels",
+        progress=opts.progress,
+        resources=task_resources(opts.device),
+    )
+    entries = [
+        {"snr_db": t.snr_db, "folder": t.out.name, "methods": r.summary["methods"]}
+        for t, r in zip(tasks, results, strict=True)
+    ]
     doc = {"schema": "bayespinn.sweep/1", "case": cfg.case, "seed": seed, "levels": entries}
     from .report.sweep import write_sweep_reports
 

@@ -34,8 +34,15 @@ def grid_posterior(cfg, data, half_width: float = 0.3, n: int = 6001) -> tuple[f
     m = ModalModel(cfg.beam, cfg.vehicle, data.x, data.t, *data.weights, n_modes=40)
 
     def logpost(le):
-        rss = np.concatenate([np.sum((data.value[None] - m.predict(np.exp(c))) ** 2, 1) for c in np.array_split(le, max(1, le.size // 200))])
-        return stats.norm.logpdf(le, math.log(cfg.prior.EI_median), cfg.prior.EI_log_sd) - 0.5 * data.value.size * np.log(rss)
+        rss = np.concatenate(
+            [
+                np.sum((data.value[None] - m.predict(np.exp(c))) ** 2, 1)
+                for c in np.array_split(le, max(1, le.size // 200))
+            ]
+        )
+        return stats.norm.logpdf(
+            le, math.log(cfg.prior.EI_median), cfg.prior.EI_log_sd
+        ) - 0.5 * data.value.size * np.log(rss)
 
     coarse = np.linspace(math.log(cfg.prior.EI_median) - 3, math.log(cfg.prior.EI_median) + 3, 1201)
     centre = coarse[int(np.argmax(logpost(coarse)))]
@@ -43,7 +50,9 @@ def grid_posterior(cfg, data, half_width: float = 0.3, n: int = 6001) -> tuple[f
     lp = logpost(le)
     w = np.exp(lp - lp.max())
     if w[0] > 1e-12 or w[-1] > 1e-12:
-        raise SystemExit(f"quadrature grid +-{half_width} in log EI does not hold the posterior; widen --half-width")
+        raise SystemExit(
+            f"quadrature grid +-{half_width} in log EI does not hold the posterior; widen --half-width"
+        )
     w /= w.sum()
     EI = np.exp(le)
     mean = float(np.sum(w * EI))
@@ -54,7 +63,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("run", type=Path, help="a bayespinn run folder (summary.json, data.csv)")
     ap.add_argument("--config", type=Path, default=None, help="the TOML the run was given, if any")
-    ap.add_argument("--case", default=None, help="deflection or strain (default: from summary.json)")
+    ap.add_argument(
+        "--case", default=None, help="deflection or strain (default: from summary.json)"
+    )
     ap.add_argument("--half-width", type=float, default=0.3)
     a = ap.parse_args(argv)
     summary = json.loads((a.run / "summary.json").read_text())
@@ -62,7 +73,9 @@ def main(argv: list[str] | None = None) -> int:
     cfg = resolve(case, a.config)
     data = read_csv(a.run / "data.csv")
     if summary.get("truth", {}).get("EI") not in (None, cfg.beam.EI):
-        print(f"warning: the run's true EI {summary['truth']['EI']} differs from the config's {cfg.beam.EI}")
+        print(
+            f"warning: the run's true EI {summary['truth']['EI']} differs from the config's {cfg.beam.EI}"
+        )
     mean, sd = grid_posterior(cfg, data, a.half_width)
     print(f"quadrature: EI mean {mean:.6e} N m^2, sd {sd:.4e} ({100 * sd / mean:.3f} %)")
     ok = True
@@ -70,13 +83,21 @@ def main(argv: list[str] | None = None) -> int:
         dm = (m["EI"]["mean"] - mean) / sd
         ratio = m["EI"]["sd"] / sd
         diag = m.get("diagnostics", {})
-        print(f"{name:12s} dmean/sd {dm:+.3f}  sd ratio {ratio:.3f}  R-hat {diag.get('rhat', float('nan')):.4f}  "
-              f"ESS bulk {diag.get('ess_bulk', float('nan')):.0f}  runtime {m.get('runtime_s', float('nan')):.1f} s")
+        print(
+            f"{name:12s} dmean/sd {dm:+.3f}  sd ratio {ratio:.3f}  R-hat {diag.get('rhat', float('nan')):.4f}  "
+            f"ESS bulk {diag.get('ess_bulk', float('nan')):.0f}  runtime {m.get('runtime_s', float('nan')):.1f} s"
+        )
         if name == "modal_mcmc":
-            ok = (abs(dm) <= MEAN_TOL_SD and abs(ratio - 1) <= SD_TOL_REL
-                  and diag.get("rhat", 9) <= RHAT_MAX and diag.get("ess_bulk", 0) >= ESS_MIN)
-            print(f"modal reference {'meets' if ok else 'MISSES'} the acceptance "
-                  f"(|dmean| <= {MEAN_TOL_SD} sd, sd within {100 * SD_TOL_REL:.0f} %, R-hat <= {RHAT_MAX}, ESS >= {ESS_MIN})")
+            ok = (
+                abs(dm) <= MEAN_TOL_SD
+                and abs(ratio - 1) <= SD_TOL_REL
+                and diag.get("rhat", 9) <= RHAT_MAX
+                and diag.get("ess_bulk", 0) >= ESS_MIN
+            )
+            print(
+                f"modal reference {'meets' if ok else 'MISSES'} the acceptance "
+                f"(|dmean| <= {MEAN_TOL_SD} sd, sd within {100 * SD_TOL_REL:.0f} %, R-hat <= {RHAT_MAX}, ESS >= {ESS_MIN})"
+            )
     return 0 if ok else 1
 
 

@@ -137,8 +137,11 @@ def blocks(doc: dict) -> list:
                 f"{r['mean_sd_rel_pct']:.3f} %",
                 "n/a" if conv is None else f"{100 * conv:.0f} %",
                 f"{r['runtime_s']:.0f}"
-                + (f" (+{r['resumed_replicates']} replicates resumed from an earlier run)"
-                   if r.get("resumed_replicates") else ""),
+                + (
+                    f" (+{r['resumed_replicates']} replicates resumed from an earlier run)"
+                    if r.get("resumed_replicates")
+                    else ""
+                ),
                 datasets(r),
                 freshness(r),
                 c.run_label(doc["runs"], r["run"]),
@@ -316,9 +319,19 @@ def rank_figure(doc: dict, out: Path) -> str | None:
     for ax, (r, ranks) in zip(axes.ravel(), studies, strict=False):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            az.plot_ecdf(ranks, cdf=stats.uniform(0, 1).cdf, difference=True, confidence_bands="optimized",
-                         ci_prob=ECDF_BAND, eval_points=grid, random_state=0, ax=ax)
-        ax.set_title(f"{name(r['method'])}, {c.snr_text(r['snr_db'])} (n = {ranks.size})", fontsize=9)
+            az.plot_ecdf(
+                ranks,
+                cdf=stats.uniform(0, 1).cdf,
+                difference=True,
+                confidence_bands="optimized",
+                ci_prob=ECDF_BAND,
+                eval_points=grid,
+                random_state=0,
+                ax=ax,
+            )
+        ax.set_title(
+            f"{name(r['method'])}, {c.snr_text(r['snr_db'])} (n = {ranks.size})", fontsize=9
+        )
         ax.set_xlabel("rank of the true EI")
         ax.axhline(0.0, color="0.6", lw=0.6)
     for ax in axes.ravel()[n:]:
@@ -395,7 +408,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.report_only:
         doc = c.load_table(out / "coverage.json", SCHEMA)
         if not doc["rows"]:
-            raise InputError("--out", str(out), "a folder with a coverage.json from an earlier study")
+            raise InputError(
+                "--out", str(out), "a folder with a coverage.json from an earlier study"
+            )
         write_page(doc, out)
         return 0
     methods = c.methods_of(args.methods)

@@ -24,6 +24,7 @@ import common as c  # noqa: E402
 
 log = logging.getLogger("studies.render")
 
+
 def page_text(name: str, out: Path) -> str | None:
     """The markdown today's code renders for <out>/<name>.json (None when the JSON is not there)."""
     from bayespinn.report.markdown import render_markdown
@@ -40,7 +41,9 @@ def page_text(name: str, out: Path) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="reports/paper", help="folder of the study pages (default reports/paper)")
+    p.add_argument(
+        "--out", default="reports/paper", help="folder of the study pages (default reports/paper)"
+    )
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
     c.setup_logging(False)
     out = Path(args.out)

@@ -38,10 +38,14 @@ def _brute_force(ll: LastLayer, D, P4, P2, f, Bm, Cm, y, lt, ls):
     th, s = math.exp(lt), math.exp(ls)
     Z = torch.cat([D / th, P4 + P2 / th, Bm, Cm])
     t = torch.cat([y, f, torch.zeros(Bm.shape[0] + Cm.shape[0], dtype=torch.float64)])
-    noise = torch.cat([
-        torch.full((D.shape[0],), s**2), torch.full((P4.shape[0],), ll.s_f**2),
-        torch.full((Bm.shape[0],), ll.s_b**2), torch.full((Cm.shape[0],), ll.s_i**2),
-    ]).double()
+    noise = torch.cat(
+        [
+            torch.full((D.shape[0],), s**2),
+            torch.full((P4.shape[0],), ll.s_f**2),
+            torch.full((Bm.shape[0],), ll.s_b**2),
+            torch.full((Cm.shape[0],), ll.s_i**2),
+        ]
+    ).double()
     S = ll.s_w**2 * Z @ Z.T + torch.diag(noise)
     return float(torch.distributions.MultivariateNormal(torch.zeros_like(t), S).log_prob(t))
 
@@ -49,10 +53,28 @@ def _brute_force(ll: LastLayer, D, P4, P2, f, Bm, Cm, y, lt, ls):
 def test_last_layer_marginal_is_exact(smoke_fit):
     cfg, data, problem, res = smoke_fit
     model = res.model()
-    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
-                   vary_first_mode=True)
-    held = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
-                     vary_first_mode=False)
+    ll = LastLayer(
+        model,
+        0,
+        problem,
+        data,
+        np.random.default_rng(0),
+        n_pde=40,
+        n_bc=10,
+        n_ic=10,
+        vary_first_mode=True,
+    )
+    held = LastLayer(
+        model,
+        0,
+        problem,
+        data,
+        np.random.default_rng(0),
+        n_pde=40,
+        n_bc=10,
+        n_ic=10,
+        vary_first_mode=False,
+    )
     # rebuild the same design matrices through the public pieces of the module, the first mode's free
     # vibrations at each theta, the higher modes without PDE rows (`LastLayer` docstring)
     from bayespinn.pinn.losses import moving_load
@@ -74,7 +96,7 @@ def test_last_layer_marginal_is_exact(smoke_fit):
         jl = low.jet(xi[None], tau[None], kx, kt, torch.tensor([lt], dtype=torch.float64))
         jl = jl.map(lambda c: c[0])
         a = comp(jet).clone()
-        a[:, -low.n_features:] = comp(jl)
+        a[:, -low.n_features :] = comp(jl)
         return a
 
     f = moving_load(xi_f[None], tau_f[None], pt)[0]
@@ -93,8 +115,18 @@ def test_last_layer_marginal_is_exact(smoke_fit):
             jb = feature_jet(model, 0, torch.full_like(tb, end), tb, 2, 0)
             rows += [jb.value, jb.dx(2)]
         ji = feature_jet(model, 0, xi_i, torch.zeros_like(xi_i), 0, 1)
-        return _brute_force(held, sc.U * j.value, P4, P2, f, torch.cat(rows), torch.cat([ji.value, ji.dt(1)]), y,
-                            lt, ls)
+        return _brute_force(
+            held,
+            sc.U * j.value,
+            P4,
+            P2,
+            f,
+            torch.cat(rows),
+            torch.cat([ji.value, ji.dt(1)]),
+            y,
+            lt,
+            ls,
+        )
 
     def brute(lt, ls):
         j = feature_jet(model, 0, xi_d, tau_d, 2, 0)
@@ -109,21 +141,42 @@ def test_last_layer_marginal_is_exact(smoke_fit):
         for end in (0.0, 1.0):
             e = torch.full_like(tb, end)
             jb = feature_jet(model, 0, e, tb, 2, 0)
-            rows += [with_low(jb, e, tb, 2, 0, lt, lambda q: q.value), with_low(jb, e, tb, 2, 0, lt, lambda q: q.dx(2))]
+            rows += [
+                with_low(jb, e, tb, 2, 0, lt, lambda q: q.value),
+                with_low(jb, e, tb, 2, 0, lt, lambda q: q.dx(2)),
+            ]
         z0 = torch.zeros_like(xi_i)
         ji = feature_jet(model, 0, xi_i, z0, 0, 1)
-        Cm = torch.cat([with_low(ji, xi_i, z0, 0, 1, lt, lambda q: q.value), with_low(ji, xi_i, z0, 0, 1, lt, lambda q: q.dt(1))])
+        Cm = torch.cat(
+            [
+                with_low(ji, xi_i, z0, 0, 1, lt, lambda q: q.value),
+                with_low(ji, xi_i, z0, 0, 1, lt, lambda q: q.dt(1)),
+            ]
+        )
         return _brute_force(ll, D, P4, P2, f, torch.cat(rows), Cm, y, lt, ls)
 
     pts = [(0.0, -7.0), (0.1, -7.5), (-0.2, -6.5)]
-    ours = [float(ll.log_marginal(torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64))) for a, b in pts]
+    ours = [
+        float(
+            ll.log_marginal(
+                torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64)
+            )
+        )
+        for a, b in pts
+    ]
     got = [brute(a, b) for a, b in pts]
     # equal up to one additive constant
     d = np.array(ours) - np.array(got)
     assert np.ptp(d) < EXACT_TOL * max(1.0, abs(got[0]))
     # the same with the first mode held at the fitted EI
-    ours_h = [float(held.log_marginal(torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64)))
-              for a, b in pts]
+    ours_h = [
+        float(
+            held.log_marginal(
+                torch.tensor(a, dtype=torch.float64), torch.tensor(b, dtype=torch.float64)
+            )
+        )
+        for a, b in pts
+    ]
     d_h = np.array(ours_h) - np.array([brute_held(a, b) for a, b in pts])
     assert np.ptp(d_h) < EXACT_TOL * max(1.0, abs(got[0]))
     # negative control: the free vibrations held at the fitted EI give a different likelihood
@@ -136,8 +189,20 @@ def test_last_layer_marginal_is_exact(smoke_fit):
             jb = feature_jet(model, 0, torch.full_like(tb, end), tb, 2, 0)
             rows += [jb.value, jb.dx(2)]
         ji = feature_jet(model, 0, xi_i, torch.zeros_like(xi_i), 0, 1)
-        frozen.append(_brute_force(ll, sc.U * j.value, pt.stiffness * jf.dx(4), pt.inertia * jf.dt(2), f,
-                                   torch.cat(rows), torch.cat([ji.value, ji.dt(1)]), y, a, b))
+        frozen.append(
+            _brute_force(
+                ll,
+                sc.U * j.value,
+                pt.stiffness * jf.dx(4),
+                pt.inertia * jf.dt(2),
+                f,
+                torch.cat(rows),
+                torch.cat([ji.value, ji.dt(1)]),
+                y,
+                a,
+                b,
+            )
+        )
     assert np.ptp(np.array(ours) - np.array(frozen)) > 100 * EXACT_TOL * max(1.0, abs(got[0]))
 
 
@@ -150,7 +215,9 @@ def test_first_mode_follows_ei_only_where_the_data_resolve_its_vibration(smoke_f
     ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
     assert ll.first_mode_varies and ll.vibration_z2 > ll.vibration_threshold and ll.nv > 0
     sd = float(np.std(data.value - data.value_true))
-    noisy = data.with_values(data.value + 30 * sd * np.random.default_rng(5).standard_normal(len(data)))
+    noisy = data.with_values(
+        data.value + 30 * sd * np.random.default_rng(5).standard_normal(len(data))
+    )
     hid = LastLayer(model, 0, problem, noisy, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
     assert not hid.first_mode_varies and hid.vibration_z2 < hid.vibration_threshold and hid.nv == 0
     assert hid.kf == hid.k
@@ -165,19 +232,37 @@ def test_full_weight_model_is_the_last_layer_one_with_free_hidden_weights(smoke_
 
     cfg, data, problem, res = smoke_fit
     model = res.model()
-    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
-                   vary_first_mode=False)
+    ll = LastLayer(
+        model,
+        0,
+        problem,
+        data,
+        np.random.default_rng(0),
+        n_pde=40,
+        n_bc=10,
+        n_ic=10,
+        vary_first_mode=False,
+    )
     fw = FullWeight(ll, model.member(0))
-    n_hidden = sum(w.numel() + b.numel() for w, b in zip(list(model.weights)[:-1], list(model.biases)[:-1], strict=True))
+    n_hidden = sum(
+        w.numel() + b.numel()
+        for w, b in zip(list(model.weights)[:-1], list(model.biases)[:-1], strict=True)
+    )
     assert fw.dim == n_hidden
     z = [(math.log(ll.theta_fit), -8.0), (0.1, -7.5)]
     T = lambda v: torch.tensor(v, dtype=torch.float64)  # noqa: E731
     for lt, ls in z:
-        assert float(fw.log_marginal(fw.h_fit, T(lt), T(ls))) == float(ll.log_marginal(T(lt), T(ls)))
-    h = fw.h_fit + 0.01 * torch.randn(fw.dim, generator=torch.Generator().manual_seed(1), dtype=torch.float64)
+        assert float(fw.log_marginal(fw.h_fit, T(lt), T(ls))) == float(
+            ll.log_marginal(T(lt), T(ls))
+        )
+    h = fw.h_fit + 0.01 * torch.randn(
+        fw.dim, generator=torch.Generator().manual_seed(1), dtype=torch.float64
+    )
     net = model.member(0).double()
     with torch.no_grad():
-        flat = iter(torch.split(h, [p.numel() for p in list(net.weights)[:-1] + list(net.biases)[:-1]]))
+        flat = iter(
+            torch.split(h, [p.numel() for p in list(net.weights)[:-1] + list(net.biases)[:-1]])
+        )
         for p in list(net.weights)[:-1]:
             p.copy_(next(flat).view(p.shape))
         for p in list(net.biases)[:-1]:
@@ -186,7 +271,9 @@ def test_full_weight_model_is_the_last_layer_one_with_free_hidden_weights(smoke_
     got = float(fw.log_marginal(h, T(0.05), T(-7.8)))
     assert abs(got - float(ref.log_marginal(T(0.05), T(-7.8)))) < EXACT_TOL * abs(got)
     # negative control: the hidden weights matter far beyond that tolerance
-    assert abs(got - float(fw.log_marginal(fw.h_fit, T(0.05), T(-7.8)))) > 100 * EXACT_TOL * abs(got)
+    assert abs(got - float(fw.log_marginal(fw.h_fit, T(0.05), T(-7.8)))) > 100 * EXACT_TOL * abs(
+        got
+    )
     hh = h.clone().requires_grad_(True)
     fw.log_marginal(hh, T(0.05), T(-7.8)).backward()
     assert torch.isfinite(hh.grad).all() and (hh.grad != 0).float().mean() > 0.9
@@ -202,9 +289,20 @@ def test_full_weight_nuts_reduces_to_the_last_layer_posterior(smoke_fit):
     from bayespinn.uq.priors import EIPrior, NoisePrior
 
     cfg, data, problem, res = smoke_fit
-    ll = LastLayer(res.model(), 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10,
-                   vary_first_mode=False)
-    pot = _Potential(ll, EIPrior.from_spec(cfg.prior), NoisePrior.build("vague", data.value, None), 0.0)
+    ll = LastLayer(
+        res.model(),
+        0,
+        problem,
+        data,
+        np.random.default_rng(0),
+        n_pde=40,
+        n_bc=10,
+        n_ic=10,
+        vary_first_mode=False,
+    )
+    pot = _Potential(
+        ll, EIPrior.from_spec(cfg.prior), NoisePrior.build("vague", data.value, None), 0.0
+    )
     z_map = _map(pot, np.array([math.log(ll.theta_fit), math.log(math.sqrt(ll.fit_rss / ll.n))]))
     L = _laplace_factor(pot, z_map)
     ref = nuts(pot, z_map, L, NUTSSettings(4, 200, 500), seed=0, progress=False).reshape(-1, 2)
@@ -232,7 +330,10 @@ def test_bpinn_variant_choice():
 
 class _Gauss:
     def __init__(self, mean, sd):
-        self.mean, self.sd = torch.tensor(mean, dtype=torch.float64), torch.tensor(sd, dtype=torch.float64)
+        self.mean, self.sd = (
+            torch.tensor(mean, dtype=torch.float64),
+            torch.tensor(sd, dtype=torch.float64),
+        )
 
     def __call__(self, params):
         return 0.5 * (((params["z"] - self.mean) / self.sd) ** 2).sum()
@@ -240,8 +341,10 @@ class _Gauss:
 
 def _ok(draws, mean, sd):
     d = draws.reshape(-1, 2)
-    return bool(np.all(np.abs(d.mean(0) - mean) < NUTS_MEAN_TOL_SD * np.array(sd))
-                and np.all(np.abs(d.std(0) / np.array(sd) - 1) < NUTS_SD_TOL))
+    return bool(
+        np.all(np.abs(d.mean(0) - mean) < NUTS_MEAN_TOL_SD * np.array(sd))
+        and np.all(np.abs(d.std(0) / np.array(sd) - 1) < NUTS_SD_TOL)
+    )
 
 
 def test_nuts_recovers_gaussian_and_negative_control():
@@ -250,12 +353,24 @@ def test_nuts_recovers_gaussian_and_negative_control():
     draws, runs = nuts(_Gauss(mean, sd), np.array(mean), np.diag(sd), s, seed=0, progress=False)
     assert draws.shape == (4, 300, 2) and _ok(draws, mean, sd)
     health = nuts_health(runs)
-    assert health["divergences"] == 0 and health["tree_depth_saturated"] == 0 and not health["sampler_warnings"]
+    assert (
+        health["divergences"] == 0
+        and health["tree_depth_saturated"] == 0
+        and not health["sampler_warnings"]
+    )
     # whitened with a factor 5 off in one direction and a shifted centre: the adaptation still finds it
-    off, _ = nuts(_Gauss(mean, sd), np.array(mean) + [0.02, 0.0], np.diag([5 * sd[0], sd[1]]), s, seed=0,
-                  progress=False)
+    off, _ = nuts(
+        _Gauss(mean, sd),
+        np.array(mean) + [0.02, 0.0],
+        np.diag([5 * sd[0], sd[1]]),
+        s,
+        seed=0,
+        progress=False,
+    )
     assert _ok(off, mean, sd)
-    wrong, _ = nuts(_Gauss(mean, [0.04, 0.07]), np.array(mean), np.diag(sd), s, seed=0, progress=False)
+    wrong, _ = nuts(
+        _Gauss(mean, [0.04, 0.07]), np.array(mean), np.diag(sd), s, seed=0, progress=False
+    )
     assert not _ok(wrong, mean, sd)
 
 
@@ -267,7 +382,9 @@ def test_methods_end_to_end_smoke(method):
     cfg = preset()
     data = simulate(cfg, 20.0, 2)
     method, _, full = method.partition("-")
-    opts = RunOptions(profile="smoke", members=3, snr_db=20.0, bpinn_variant="full" if full else "auto")
+    opts = RunOptions(
+        profile="smoke", members=3, snr_db=20.0, bpinn_variant="full" if full else "auto"
+    )
     p = infer(method, data, cfg, 2, opts)
     s = p.summary({"EI": cfg.beam.EI})
     assert np.isfinite(s["EI"]["mean"]) and s["EI"]["ci90"][0] < s["EI"]["ci90"][1]
@@ -275,7 +392,9 @@ def test_methods_end_to_end_smoke(method):
     if method == "ensemble":
         assert s["members"] == 3 and len(s["member_EI"]) == 3
     else:
-        assert s["diagnostics"]["chains"] >= 4 and s["variant"] == (FULL_VARIANT if full else VARIANT)
+        assert s["diagnostics"]["chains"] >= 4 and s["variant"] == (
+            FULL_VARIANT if full else VARIANT
+        )
     band = p.predictor(np.array([4.0, 8.0]), np.array([0.8, 1.2]), "deflection", 12)
     assert band.shape[1] == 2 and np.all(np.isfinite(band))
     moment = p.predictor(np.array([4.0, 8.0]), np.array([0.8, 1.2]), "moment", 12)
@@ -303,7 +422,9 @@ def test_ensemble_pooling_skips_members_without_a_local_width():
     log_ei = np.array([0.0, 0.02, -0.02, 0.01, -0.01]) + np.log(1.03e9)
     lap = np.full(5, 0.01)
     between, lap_var, nu, pooled = pool_log_ei(log_ei, lap, 0.5)
-    np.testing.assert_allclose([between, lap_var, nu, pooled], [2.5e-4, 1e-4, 4.0, 1.75e-4], rtol=1e-9)
+    np.testing.assert_allclose(
+        [between, lap_var, nu, pooled], [2.5e-4, 1e-4, 4.0, 1.75e-4], rtol=1e-9
+    )
     # member 4 without a peak: the Laplace term rests on the other four (variance 1e-4) and counts 4/5 of its
     # dof (3.2): pooled (3.2 * 1e-4 + 0.001) / 7.2 = 1.8333e-4
     lap_nan = lap.copy()
@@ -325,9 +446,13 @@ def test_pooled_variance_is_unbiased_when_members_scatter_as_their_laplace_width
 
     rng = np.random.default_rng(7)
     s, n = 0.01, 4000
-    pooled = np.array([pool_log_ei(s * rng.standard_normal(5), np.full(5, s), 0.5)[3] for _ in range(n)])
+    pooled = np.array(
+        [pool_log_ei(s * rng.standard_normal(5), np.full(5, s), 0.5)[3] for _ in range(n)]
+    )
     # the between-member term alone has sd sqrt(2/4) s^2; the mean of n draws is within 4 standard errors
     assert abs(pooled.mean() / s**2 - 1) < 4 * np.sqrt(0.5) / np.sqrt(n)
     # negative control: members scattered 1.5x wider than their widths say are detected as biased
-    wide = np.array([pool_log_ei(1.5 * s * rng.standard_normal(5), np.full(5, s), 0.5)[3] for _ in range(n)])
+    wide = np.array(
+        [pool_log_ei(1.5 * s * rng.standard_normal(5), np.full(5, s), 0.5)[3] for _ in range(n)]
+    )
     assert abs(wide.mean() / s**2 - 1) > 4 * np.sqrt(0.5) / np.sqrt(n)

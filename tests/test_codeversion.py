@@ -11,7 +11,9 @@ def test_a_method_depends_on_its_own_modules_and_the_simulator_only():
     assert "bayespinn.data.synthetic" in modal and "bayespinn.physics.fem" in modal
     assert not any(m.startswith(("bayespinn.pinn", "bayespinn.report")) for m in modal)
     bpinn = cv.closure(cv.METHOD_MODULES["bpinn"])
-    assert "bayespinn.uq.nuts" in bpinn and "bayespinn.pinn.train" in bpinn  # imports inside functions count
+    assert (
+        "bayespinn.uq.nuts" in bpinn and "bayespinn.pinn.train" in bpinn
+    )  # imports inside functions count
 
 
 def test_version_ignores_docstrings_and_formatting_but_not_code(tmp_path, monkeypatch):
@@ -20,12 +22,16 @@ def test_version_ignores_docstrings_and_formatting_but_not_code(tmp_path, monkey
     (pkg / "__init__.py").write_text("")
     (pkg / "uq" / "__init__.py").write_text("")
     src = pkg / "uq" / "m.py"
-    src.write_text('"""Doc."""\nfrom .. import helper\n\ndef f(x):\n    """f."""\n    return x + 1\n')
+    src.write_text(
+        '"""Doc."""\nfrom .. import helper\n\ndef f(x):\n    """f."""\n    return x + 1\n'
+    )
     (pkg / "helper.py").write_text("A = 1\n")
     monkeypatch.setattr(cv, "ROOT", pkg)
     cv._module_digest.cache_clear()
     v0 = cv.code_version("bayespinn.uq.m")
-    src.write_text('"""Other words."""\nfrom .. import helper\n\n\ndef f(x):\n    return (x + 1)  # same\n')
+    src.write_text(
+        '"""Other words."""\nfrom .. import helper\n\n\ndef f(x):\n    return (x + 1)  # same\n'
+    )
     cv._module_digest.cache_clear()
     assert cv.code_version("bayespinn.uq.m") == v0
     (pkg / "helper.py").write_text("A = 2\n")  # an imported module's code changes: a new version

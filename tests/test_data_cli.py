@@ -18,7 +18,9 @@ DEFLECTION_TRUTH_TOL, STRAIN_TRUTH_TOL = 1e-3, 1e-2
 
 
 def _cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "bayespinn", *args], capture_output=True, text=True, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "bayespinn", *args], capture_output=True, text=True, cwd=cwd
+    )
 
 
 def _rel_rms(a, b):
@@ -36,9 +38,16 @@ def test_exeter_preset():
 
 def test_toml_overrides(tmp_path):
     f = tmp_path / "c.toml"
-    f.write_text("[beam]\nlength = 20.0\nEI = 2e9\n[vehicle]\nspeed = 10.0\naxles = [{load = 5e4, offset = 0.0}, {load = 6e4, offset = 3.0}]\n[data]\nn_points = 50\n")
+    f.write_text(
+        "[beam]\nlength = 20.0\nEI = 2e9\n[vehicle]\nspeed = 10.0\naxles = [{load = 5e4, offset = 0.0}, {load = 6e4, offset = 3.0}]\n[data]\nn_points = 50\n"
+    )
     cfg = resolve("deflection", f)
-    assert (cfg.beam.length, cfg.beam.EI, cfg.vehicle.speed, cfg.data.n_points) == (20.0, 2e9, 10.0, 50)
+    assert (cfg.beam.length, cfg.beam.EI, cfg.vehicle.speed, cfg.data.n_points) == (
+        20.0,
+        2e9,
+        10.0,
+        50,
+    )
     assert cfg.vehicle.offsets.tolist() == [0.0, 3.0]
     assert cfg.beam.mass_per_length == 289.0  # untouched preset value
 
@@ -77,9 +86,9 @@ def test_simulate_clean_matches_closed_form(exeter):
 def test_simulate_strain_matches_closed_form(exeter_strain):
     d = simulate(exeter_strain, None, 0)
     assert set(d.sensor) == {"S1", "S2", "S3", "S4"}
-    ref = ModalModel(exeter_strain.beam, exeter_strain.vehicle, d.x, d.t, *d.weights, n_modes=40).predict(
-        exeter_strain.beam.EI
-    )
+    ref = ModalModel(
+        exeter_strain.beam, exeter_strain.vehicle, d.x, d.t, *d.weights, n_modes=40
+    ).predict(exeter_strain.beam.EI)
     assert _rel_rms(d.value, ref) < STRAIN_TRUTH_TOL
     # bottom flange in tension under a load near midspan
     s4 = (d.sensor == "S4") & (np.abs(d.t - 0.5 * exeter_strain.duration) < 0.1)
@@ -136,14 +145,31 @@ def test_binary_csv(tmp_path):
 
 
 def test_cli_simulate_and_bad_input(tmp_path):
-    r = _cli("simulate", "--case", "deflection", "--snr", "clean", "--seed", "3", "--out", str(tmp_path / "a.csv"))
+    r = _cli(
+        "simulate",
+        "--case",
+        "deflection",
+        "--snr",
+        "clean",
+        "--seed",
+        "3",
+        "--out",
+        str(tmp_path / "a.csv"),
+    )
     assert r.returncode == 0, r.stderr
     assert len((tmp_path / "a.csv").read_text().splitlines()) == 101
     bad_toml = tmp_path / "bad.toml"
     bad_toml.write_text("[beam]\nlength = -1\n")
-    for args in (["--snr", "nan"], ["--snr", "inf"], ["--snr", "abc"], ["--snr=-5"], ["--snr", "10", "--config", str(bad_toml)],
-                 ["--snr", "10", "--case", "tilt"], ["--snr", "10", "--device", "tpu"],
-                 ["--snr", "10", "--bpinn-variant", "fulll"]):
+    for args in (
+        ["--snr", "nan"],
+        ["--snr", "inf"],
+        ["--snr", "abc"],
+        ["--snr=-5"],
+        ["--snr", "10", "--config", str(bad_toml)],
+        ["--snr", "10", "--case", "tilt"],
+        ["--snr", "10", "--device", "tpu"],
+        ["--snr", "10", "--bpinn-variant", "fulll"],
+    ):
         out = tmp_path / "b.csv"
         r = _cli("simulate", *args, "--out", str(out))
         assert r.returncode == 2, (args, r.stderr)
@@ -173,7 +199,18 @@ def test_cli_coverage_resumes_from_its_file(tmp_path):
     """`coverage --resume` reuses the replicates of the --out file of the same study and runs the rest;
     without --resume the study starts afresh."""
     out = tmp_path / "cov.json"
-    args = ("coverage", "--method", "modal", "--snr", "30", "--profile", "smoke", "--out", str(out), "--quiet")
+    args = (
+        "coverage",
+        "--method",
+        "modal",
+        "--snr",
+        "30",
+        "--profile",
+        "smoke",
+        "--out",
+        str(out),
+        "--quiet",
+    )
     assert _cli(*args, "--replicates", "1").returncode == 0
     first = json.loads(out.read_text(encoding="utf-8"))
     r = _cli(*args, "--replicates", "2", "--resume")

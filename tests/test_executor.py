@@ -11,7 +11,9 @@ from bayespinn.uq.coverage import coverage_study
 from bayespinn.uq.methods import RunOptions
 from bayespinn.uq.sampler import MCMCSettings
 
-SMALL = RunOptions(profile="smoke", mcmc=MCMCSettings(n_walkers=8, n_groups=2, min_steps=250, tau_factor=5.0))
+SMALL = RunOptions(
+    profile="smoke", mcmc=MCMCSettings(n_walkers=8, n_groups=2, min_steps=250, tau_factor=5.0)
+)
 
 
 def _strip(res):
@@ -19,7 +21,9 @@ def _strip(res):
 
 
 def _study(executor):
-    return coverage_study("modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, executor=executor, progress=False)
+    return coverage_study(
+        "modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, executor=executor, progress=False
+    )
 
 
 def _warm_parent_cache():
@@ -74,19 +78,46 @@ def test_coverage_resumes_from_its_checkpoint(tmp_path, monkeypatch):
 
     monkeypatch.setattr(cov, "run_replicate", failing)
     with pytest.raises(KeyboardInterrupt):
-        coverage_study("modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, progress=False,
-                       executor=Executor("local", workers=1), checkpoint=ck)
+        coverage_study(
+            "modal",
+            preset(),
+            10.0,
+            replicates=4,
+            seed=3,
+            opts=SMALL,
+            progress=False,
+            executor=Executor("local", workers=1),
+            checkpoint=ck,
+        )
     assert len(ck.read_text().splitlines()) == 3  # header + replicates 0 and 1
     monkeypatch.setattr(cov, "run_replicate", lambda t: (calls.append(t.index), real(t))[1])
     calls.clear()
-    res = coverage_study("modal", preset(), 10.0, replicates=4, seed=3, opts=SMALL, progress=False,
-                         executor=Executor("local", workers=1), checkpoint=ck)
+    res = coverage_study(
+        "modal",
+        preset(),
+        10.0,
+        replicates=4,
+        seed=3,
+        opts=SMALL,
+        progress=False,
+        executor=Executor("local", workers=1),
+        checkpoint=ck,
+    )
     assert calls == [2, 3] and res["resumed_replicates"] == 2
     assert _strip(res) == _strip(full)
     # another seed is another study: nothing is reused
     calls.clear()
-    other = coverage_study("modal", preset(), 10.0, replicates=2, seed=4, opts=SMALL, progress=False,
-                           executor=Executor("local", workers=1), checkpoint=ck)
+    other = coverage_study(
+        "modal",
+        preset(),
+        10.0,
+        replicates=2,
+        seed=4,
+        opts=SMALL,
+        progress=False,
+        executor=Executor("local", workers=1),
+        checkpoint=ck,
+    )
     assert calls == [0, 1] and other["resumed_replicates"] == 0
 
 
@@ -99,8 +130,17 @@ def test_coverage_resumes_from_an_earlier_study_file(tmp_path, monkeypatch):
     import bayespinn.uq.coverage as cov
 
     def run(n, seed=3, resume_from=None):
-        return coverage_study("modal", preset(), 10.0, replicates=n, seed=seed, opts=SMALL, progress=False,
-                              executor=Executor("local", workers=1), resume_from=resume_from)
+        return coverage_study(
+            "modal",
+            preset(),
+            10.0,
+            replicates=n,
+            seed=seed,
+            opts=SMALL,
+            progress=False,
+            executor=Executor("local", workers=1),
+            resume_from=resume_from,
+        )
 
     first = tmp_path / "first.json"
     first.write_text(json.dumps(run(2)), encoding="utf-8")
@@ -127,7 +167,13 @@ def _ensemble(executor, seed=3):
 
     cfg = preset()
     data = simulate(cfg, 20.0, seed=1)
-    post = infer("ensemble", data, cfg, seed, RunOptions(profile="smoke", members=3, device="cpu", executor=executor))
+    post = infer(
+        "ensemble",
+        data,
+        cfg,
+        seed,
+        RunOptions(profile="smoke", members=3, device="cpu", executor=executor),
+    )
     assert post.diagnostics["training"] == "one task per member"
     return post.info["member_EI"], post.info["member_sigma_mode"], np.asarray(post.EI).ravel()
 
@@ -150,13 +196,24 @@ def test_sweep_levels_do_not_depend_on_workers(tmp_path):
     docs = []
     for w in (1, 2):
         out = tmp_path / f"w{w}"
-        docs.append(sweep(preset(), levels=[None, 20.0], methods=["modal", "ensemble"], seed=0, out=out,
-                          opts=dataclasses.replace(opts, executor=Executor("local", workers=w))))
+        docs.append(
+            sweep(
+                preset(),
+                levels=[None, 20.0],
+                methods=["modal", "ensemble"],
+                seed=0,
+                out=out,
+                opts=dataclasses.replace(opts, executor=Executor("local", workers=w)),
+            )
+        )
         assert {p.name for p in out.iterdir()} >= {"snrclean", "snr20", "sweep.json", "report.html"}
         assert json.loads((out / "snr20" / "summary.json").read_text())["snr_db"] == 20.0
 
     def means(doc):
-        return [(lv["snr_db"], {k: m["EI"]["mean"] for k, m in lv["methods"].items()}) for lv in doc["levels"]]
+        return [
+            (lv["snr_db"], {k: m["EI"]["mean"] for k, m in lv["methods"].items()})
+            for lv in doc["levels"]
+        ]
 
     assert means(docs[0]) == means(docs[1])
     assert [lv["snr_db"] for lv in docs[0]["levels"]] == [None, 20.0]
@@ -165,12 +222,20 @@ def test_sweep_levels_do_not_depend_on_workers(tmp_path):
 def test_bench_ensemble_reports_what_the_toolkit_uses():
     from bayespinn.pinn.bench import bench_ensemble
 
-    r = bench_ensemble(members=2, points=40, repeats=1, warmup=1, parallel_steps=2, parallel_rounds=3, workers=2)
+    r = bench_ensemble(
+        members=2, points=40, repeats=1, warmup=1, parallel_steps=2, parallel_rounds=3, workers=2
+    )
     assert r["together"] == "parallel processes" and r["workers"] == 2
     assert r["speedup"] == r["parallel_speedup"] == r["sequential_s"] / r["parallel_s"]
     # the compared times are the medians of the interleaved rounds
-    assert r["parallel_rounds"] == 3 and len(r["sequential_rounds_s"]) == len(r["parallel_rounds_s"]) == 3
-    assert r["sequential_s"] == sorted(r["sequential_rounds_s"])[1] and r["parallel_s"] == sorted(r["parallel_rounds_s"])[1]
+    assert (
+        r["parallel_rounds"] == 3
+        and len(r["sequential_rounds_s"]) == len(r["parallel_rounds_s"]) == 3
+    )
+    assert (
+        r["sequential_s"] == sorted(r["sequential_rounds_s"])[1]
+        and r["parallel_s"] == sorted(r["parallel_rounds_s"])[1]
+    )
     assert r["batched_speedup"] == r["sequential_ms_per_epoch"] / r["batched_ms_per_epoch"]
 
 
@@ -181,7 +246,10 @@ def test_bad_executor_is_input_error():
         Executor("dask")
 
 
-@pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="Ray is not installed (pip install 'bayespinn[ray]')")
+@pytest.mark.skipif(
+    importlib.util.find_spec("ray") is None,
+    reason="Ray is not installed (pip install 'bayespinn[ray]')",
+)
 def test_ray_matches_local():
     import ray
 
@@ -221,13 +289,24 @@ def test_coverage_resume_refuses_other_code_unless_asked(tmp_path, monkeypatch):
     from bayespinn.errors import InputError
 
     def run(n, **kw):
-        return coverage_study("modal", preset(), 10.0, replicates=n, seed=3, opts=SMALL, progress=False,
-                              executor=Executor("local", workers=1), **kw)
+        return coverage_study(
+            "modal",
+            preset(),
+            10.0,
+            replicates=n,
+            seed=3,
+            opts=SMALL,
+            progress=False,
+            executor=Executor("local", workers=1),
+            **kw,
+        )
 
     first = tmp_path / "first.json"
     doc = run(2)
     assert doc["code_versions"] == {doc["code_version"]: 2} and doc["mixed_versions"] is False
-    doc["records"][0]["code_version"] = "0123456789ab"  # as if computed before a change to the method
+    doc["records"][0]["code_version"] = (
+        "0123456789ab"  # as if computed before a change to the method
+    )
     first.write_text(json.dumps(doc), encoding="utf-8")
     with pytest.raises(InputError, match="--mix-versions"):
         run(3, resume_from=first)

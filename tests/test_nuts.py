@@ -34,19 +34,43 @@ def _funnel(params):
 
 
 def test_well_posed_target_has_no_problems():
-    runs = [run_nuts(_gauss, {"u": torch.zeros(2, dtype=torch.float64)}, warmup=150, samples=300, seed=_seed(c),
-                     max_tree_depth=6) for c in range(2)]
+    runs = [
+        run_nuts(
+            _gauss,
+            {"u": torch.zeros(2, dtype=torch.float64)},
+            warmup=150,
+            samples=300,
+            seed=_seed(c),
+            max_tree_depth=6,
+        )
+        for c in range(2)
+    ]
     h = nuts_health(runs)
-    assert h["divergences"] == 0 and h["tree_depth_saturated"] == 0 and h["nonfinite_potential"] == 0
-    assert 1 <= h["mean_tree_depth"] <= 4  # a unit Gaussian needs a few leapfrog steps, not hundreds
-    assert all(r.lp.shape == (300,) and np.all(r.lp <= 0) for r in runs)  # lp = -potential, potential >= 0
+    assert (
+        h["divergences"] == 0 and h["tree_depth_saturated"] == 0 and h["nonfinite_potential"] == 0
+    )
+    assert (
+        1 <= h["mean_tree_depth"] <= 4
+    )  # a unit Gaussian needs a few leapfrog steps, not hundreds
+    assert all(
+        r.lp.shape == (300,) and np.all(r.lp <= 0) for r in runs
+    )  # lp = -potential, potential >= 0
     diag = {"rhat": 1.0, "ess_bulk": 800.0, "ess_tail": 700.0, **h}
     assert problems(diag) == []
 
 
 def test_a_flat_direction_saturates_the_tree_depth_and_is_not_converged():
-    runs = [run_nuts(_flat_direction, {"u": torch.zeros(2, dtype=torch.float64)}, warmup=40, samples=40,
-                     seed=_seed(c), max_tree_depth=5) for c in range(2)]
+    runs = [
+        run_nuts(
+            _flat_direction,
+            {"u": torch.zeros(2, dtype=torch.float64)},
+            warmup=40,
+            samples=40,
+            seed=_seed(c),
+            max_tree_depth=5,
+        )
+        for c in range(2)
+    ]
     h = nuts_health(runs)
     assert h["tree_depth_saturated_fraction"] > 0.5
     trouble = problems({"rhat": 1.0, "ess_bulk": 1e4, "ess_tail": 1e4, **h})
@@ -54,16 +78,36 @@ def test_a_flat_direction_saturates_the_tree_depth_and_is_not_converged():
 
 
 def test_the_funnel_diverges_and_is_not_converged():
-    runs = [run_nuts(_funnel, {"u": torch.zeros(4, dtype=torch.float64)}, warmup=100, samples=200,
-                     seed=_seed(c), max_tree_depth=6, full_mass=False) for c in range(2)]
+    runs = [
+        run_nuts(
+            _funnel,
+            {"u": torch.zeros(4, dtype=torch.float64)},
+            warmup=100,
+            samples=200,
+            seed=_seed(c),
+            max_tree_depth=6,
+            full_mass=False,
+        )
+        for c in range(2)
+    ]
     h = nuts_health(runs)
     assert h["divergences"] > 0
-    assert any("divergent" in t for t in problems({"rhat": 1.0, "ess_bulk": 1e4, "ess_tail": 1e4, **h}))
+    assert any(
+        "divergent" in t for t in problems({"rhat": 1.0, "ess_bulk": 1e4, "ess_tail": 1e4, **h})
+    )
 
 
 def test_problems_name_every_threshold():
-    t = problems({"rhat": RHAT_MAX + 0.05, "ess_bulk": ESS_MIN - 1, "ess_tail": ESS_MIN - 1, "divergences": 3,
-                  "tree_depth_saturated": 2, "max_tree_depth": 10})
+    t = problems(
+        {
+            "rhat": RHAT_MAX + 0.05,
+            "ess_bulk": ESS_MIN - 1,
+            "ess_tail": ESS_MIN - 1,
+            "divergences": 3,
+            "tree_depth_saturated": 2,
+            "max_tree_depth": 10,
+        }
+    )
     assert len(t) == 5 and "R-hat" in t[0] and "bulk ESS" in t[1] and "tail ESS" in t[2]
     assert problems({"rhat": float("nan"), "ess_bulk": 500.0, "ess_tail": 500.0}) == ["R-hat n/a"]
 
@@ -99,8 +143,24 @@ def struggling_run(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("struggle")
     (tmp / "two.toml").write_text("[data]\nn_points = 2\n", encoding="utf-8")
     out = tmp / "run"
-    code = main(["run", "--snr", "30", "--method", "bpinn", "--profile", "smoke", "--seed", "1", "--quiet",
-                 "--config", str(tmp / "two.toml"), "--out", str(out)])
+    code = main(
+        [
+            "run",
+            "--snr",
+            "30",
+            "--method",
+            "bpinn",
+            "--profile",
+            "smoke",
+            "--seed",
+            "1",
+            "--quiet",
+            "--config",
+            str(tmp / "two.toml"),
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     return out
 

@@ -38,8 +38,15 @@ def _ode_modal(beam, vehicle, x, t, n=10):
                 f += (2 * P / (mu * L)) * np.sin(k * a)
         return np.concatenate([qd, f - w**2 * q - 2 * z * w * qd])
 
-    sol = solve_ivp(rhs, (0, t.max()), np.zeros(2 * n), method="DOP853", rtol=1e-10, atol=1e-16,
-                    dense_output=True)
+    sol = solve_ivp(
+        rhs,
+        (0, t.max()),
+        np.zeros(2 * n),
+        method="DOP853",
+        rtol=1e-10,
+        atol=1e-16,
+        dense_output=True,
+    )
     Y = sol.sol(t)
     phi = np.sin(k[:, None] * x[None])
     u = np.einsum("np,np->p", Y[:n], phi)
@@ -158,7 +165,10 @@ def test_fe_converges_in_space(exeter):
     slow = Vehicle(speed=1.0, axles=(Axle(37000.0, 0.0),))
     x, t = np.array([0.37 * beam.length]), np.array([0.61 * beam.length])
     ref = ModalModel(beam, slow, x, t, n_modes=40).predict(beam.EI)
-    errs = [abs(fe_response(beam, slow, x, t, settings=FESettings(ne, 4000))[0] - ref[0]) for ne in (3, 5, 7, 9)]
+    errs = [
+        abs(fe_response(beam, slow, x, t, settings=FESettings(ne, 4000))[0] - ref[0])
+        for ne in (3, 5, 7, 9)
+    ]
     assert errs[0] > errs[1] > errs[2] > errs[3], errs
     h = 1.0 / np.array([3, 5, 7, 9])
     order = np.log(np.array(errs[:-1]) / np.array(errs[1:])) / np.log(h[:-1] / h[1:])

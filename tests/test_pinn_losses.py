@@ -28,17 +28,36 @@ TOL = 1e-10
 def _sin_jet(n: float, xi, W: float, tau, kx=4, kt=2, phase=0.0):
     """Jet of w = sin(n pi xi) sin(W tau + phase), exact derivatives."""
     a = n * math.pi
-    sx = [torch.sin(a * xi), a * torch.cos(a * xi), -(a**2) * torch.sin(a * xi), -(a**3) * torch.cos(a * xi),
-          a**4 * torch.sin(a * xi)]
-    st = [torch.sin(W * tau + phase), W * torch.cos(W * tau + phase), -(W**2) * torch.sin(W * tau + phase)]
-    return Jet(sx[0] * st[0], tuple(sx[k] * st[0] for k in range(1, kx + 1)), tuple(sx[0] * st[k] for k in range(1, kt + 1)))
+    sx = [
+        torch.sin(a * xi),
+        a * torch.cos(a * xi),
+        -(a**2) * torch.sin(a * xi),
+        -(a**3) * torch.cos(a * xi),
+        a**4 * torch.sin(a * xi),
+    ]
+    st = [
+        torch.sin(W * tau + phase),
+        W * torch.cos(W * tau + phase),
+        -(W**2) * torch.sin(W * tau + phase),
+    ]
+    return Jet(
+        sx[0] * st[0],
+        tuple(sx[k] * st[0] for k in range(1, kx + 1)),
+        tuple(sx[0] * st[k] for k in range(1, kt + 1)),
+    )
 
 
 @pytest.fixture(scope="module")
 def problem():
     cfg = preset("deflection")
-    d = Measurements(np.array([3.0, 9.0]), np.array([0.5, 1.0]), np.zeros(2), np.array(["deflection"] * 2),
-                     np.full(2, np.nan), np.array(["", ""]))
+    d = Measurements(
+        np.array([3.0, 9.0]),
+        np.array([0.5, 1.0]),
+        np.zeros(2),
+        np.array(["deflection"] * 2),
+        np.full(2, np.nan),
+        np.array(["", ""]),
+    )
     return Problem.from_config(cfg, d)
 
 
@@ -61,8 +80,18 @@ def test_pde_residual_zero_on_free_vibration(problem):
 @pytest.mark.parametrize("case", ["deflection", "strain"])
 def test_moving_load_matches_physics(case):
     cfg = preset(case)
-    prob = Problem.from_config(cfg, Measurements(np.array([1.0]), np.array([0.1]), np.zeros(1), np.array(["deflection"]),
-                                                 np.full(1, np.nan), np.array([""])), beta=0.3)
+    prob = Problem.from_config(
+        cfg,
+        Measurements(
+            np.array([1.0]),
+            np.array([0.1]),
+            np.zeros(1),
+            np.array(["deflection"]),
+            np.full(1, np.nan),
+            np.array([""]),
+        ),
+        beta=0.3,
+    )
     sc = prob.scales
     pt = prob.tensors(1, dtype=DD)
     rng = np.random.default_rng(1)
@@ -86,7 +115,11 @@ def test_ic_and_bc_zero_on_exact_functions():
     # w = sin(pi xi) * (1 - cos(W tau)) has w = w_tau = 0 at tau = 0
     W = 7.0
     zero = torch.zeros_like(xi)
-    j_ic = Jet(torch.sin(math.pi * xi) * (1 - torch.cos(W * zero)), (), (torch.sin(math.pi * xi) * W * torch.sin(W * zero),))
+    j_ic = Jet(
+        torch.sin(math.pi * xi) * (1 - torch.cos(W * zero)),
+        (),
+        (torch.sin(math.pi * xi) * W * torch.sin(W * zero),),
+    )
     assert float(ic_loss(j_ic).max()) < TOL
     # simply supported shapes: w = sin(n pi xi) f(tau) has w = w_xx = 0 at xi = 0, 1
     tau = torch.rand(2, 100, generator=g, dtype=DD)
@@ -131,4 +164,6 @@ def test_posterior_scale_is_gaussian_nll(problem):
     pt = prob.tensors(1, dtype=DD)
     r_phys = np.array([1e-4, -3e-4])
     r_scaled = r_phys / prob.row_scales()
-    assert math.isclose(pt.data_scale * np.mean(r_scaled**2), np.sum(r_phys**2) / (2 * sigma**2), rel_tol=1e-12)
+    assert math.isclose(
+        pt.data_scale * np.mean(r_scaled**2), np.sum(r_phys**2) / (2 * sigma**2), rel_tol=1e-12
+    )

@@ -19,7 +19,12 @@ CASES = [
     dict(oscillator=40.0),
     dict(hard_bc=True, hard_ic=True, oscillator=25.0),
     dict(oscillator=40.0, extras=(StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05),)),
-    dict(extras=(StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05), FreeVibration((0.0, 0.3, 0.7), 2, 30.0, 0.02))),
+    dict(
+        extras=(
+            StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05),
+            FreeVibration((0.0, 0.3, 0.7), 2, 30.0, 0.02),
+        )
+    ),
 ]
 
 
@@ -29,19 +34,28 @@ def _net(dtype, members=2, **kw):
     with torch.no_grad():
         net.log_ei.copy_(torch.linspace(-0.1, 0.2, members))
         # the modulated coefficients start at zero: make them count, or the check would be empty
-        net.osc_head.copy_(torch.randn(net.osc_head.shape, generator=gens[0], dtype=torch.float64).to(dtype))
-        net.extra_head.copy_(torch.randn(net.extra_head.shape, generator=gens[0], dtype=torch.float64).to(dtype))
+        net.osc_head.copy_(
+            torch.randn(net.osc_head.shape, generator=gens[0], dtype=torch.float64).to(dtype)
+        )
+        net.extra_head.copy_(
+            torch.randn(net.extra_head.shape, generator=gens[0], dtype=torch.float64).to(dtype)
+        )
     return net
 
 
 def _points(dtype, members=2, n=40):
     g = torch.Generator().manual_seed(3)
-    return torch.rand(members, n, generator=g, dtype=dtype), torch.rand(members, n, generator=g, dtype=dtype)
+    return torch.rand(members, n, generator=g, dtype=dtype), torch.rand(
+        members, n, generator=g, dtype=dtype
+    )
 
 
 def _max_rel(a, b):
     comps = [(a.dx(k), b.dx(k)) for k in range(5)] + [(a.dt(k), b.dt(k)) for k in (1, 2)]
-    return max(float((x - y).abs().max() / y.abs().max()) for x, y in ((x.detach(), y.detach()) for x, y in comps))
+    return max(
+        float((x - y).abs().max() / y.abs().max())
+        for x, y in ((x.detach(), y.detach()) for x, y in comps)
+    )
 
 
 @pytest.mark.parametrize("kw", CASES)
@@ -62,7 +76,9 @@ def test_parameter_gradients_agree():
     for engine in ("taylor", "taylor-unfused", "autograd"):
         net.zero_grad()
         j = net.jet(xi, tau, 4, 2, engine=engine)
-        loss = ((net.EI_ratio[:, None] * j.dx(4) / 48 + 0.1 * j.dt(2) - 1) ** 2).mean() + (j.dx(2) ** 2).mean()
+        loss = ((net.EI_ratio[:, None] * j.dx(4) / 48 + 0.1 * j.dt(2) - 1) ** 2).mean() + (
+            j.dx(2) ** 2
+        ).mean()
         loss = loss + (j.dt(1) ** 2).mean() + (j.value**2).mean()
         loss.backward()
         grads[engine] = torch.cat([p.grad.flatten() for p in net.parameters() if p.numel()])
@@ -112,7 +128,9 @@ def test_hard_constraints_hold_exactly():
     for end in (0.0, 1.0):
         j = net.jet(torch.full_like(t, end), t, 2, 0)
         assert float(j.value.abs().max()) < 1e-12 and float(j.dx(2).abs().max()) < 1e-10
-    j = net.jet(torch.rand(2, 30, dtype=torch.float64), torch.zeros(2, 30, dtype=torch.float64), 0, 1)
+    j = net.jet(
+        torch.rand(2, 30, dtype=torch.float64), torch.zeros(2, 30, dtype=torch.float64), 0, 1
+    )
     assert float(j.value.abs().max()) < 1e-14 and float(j.dt(1).abs().max()) < 1e-12
 
 
@@ -123,11 +141,28 @@ def test_static_enrichment_solves_the_gaussian_load():
 
     enr = StaticEnrichment((0.7, 1.0), (0.0, 0.25), 1.3, 0.03)
     g = torch.Generator().manual_seed(5)
-    xi, tau = torch.rand(1, 500, generator=g, dtype=torch.float64), torch.rand(1, 500, generator=g, dtype=torch.float64)
+    xi, tau = (
+        torch.rand(1, 500, generator=g, dtype=torch.float64),
+        torch.rand(1, 500, generator=g, dtype=torch.float64),
+    )
     z = torch.zeros(1, dtype=torch.float64)
-    pt = ProblemTensors(xi, tau, z, z, z, False, True, None, None, torch.tensor(enr.loads, dtype=torch.float64),
-                        torch.tensor(enr.delays, dtype=torch.float64), enr.speed,
-                        torch.tensor(enr.beta_rel, dtype=torch.float64), 1 / 48, 0.0)
+    pt = ProblemTensors(
+        xi,
+        tau,
+        z,
+        z,
+        z,
+        False,
+        True,
+        None,
+        None,
+        torch.tensor(enr.loads, dtype=torch.float64),
+        torch.tensor(enr.delays, dtype=torch.float64),
+        enr.speed,
+        torch.tensor(enr.beta_rel, dtype=torch.float64),
+        1 / 48,
+        0.0,
+    )
     f = moving_load(xi, tau, pt, images=True)
     j = enr.jet(xi, tau, 4, 2)
     # series truncated where g_n < 1e-9 (enrich.SERIES_TOL); the load peaks at ~1/(beta sqrt(pi)) ~ 19
@@ -142,7 +177,10 @@ def test_free_vibrations_solve_the_homogeneous_equation():
     with c = theta pi^4 / (48 W_1^2 exp(s)) fixed by the dispersion relation, and vanishes at the supports."""
     fv = FreeVibration((0.0, 0.4), 2, 30.0, 0.0)
     g = torch.Generator().manual_seed(6)
-    xi, tau = torch.rand(1, 400, generator=g, dtype=torch.float64), torch.rand(1, 400, generator=g, dtype=torch.float64)
+    xi, tau = (
+        torch.rand(1, 400, generator=g, dtype=torch.float64),
+        torch.rand(1, 400, generator=g, dtype=torch.float64),
+    )
     s = torch.tensor([0.1], dtype=torch.float64)
     j = fv.jet(xi, tau, 4, 2, s)
     theta = float(torch.exp(s))

@@ -78,7 +78,12 @@ def test_lbfgs_line_search_backs_off_from_a_non_finite_trial_step():
     from bayespinn.data.synthetic import simulate
 
     cfg = preset()
-    res = fit(Problem.from_config(cfg, simulate(cfg, 20.0, 1)), TrainSettings.for_profile("smoke"), seed=0, quiet=True)
+    res = fit(
+        Problem.from_config(cfg, simulate(cfg, 20.0, 1)),
+        TrainSettings.for_profile("smoke"),
+        seed=0,
+        quiet=True,
+    )
     assert math.isfinite(res.EI) and res.EI > 0
 
 
@@ -142,7 +147,9 @@ def test_anchor_pulls_log_ei(problem, optimizer):
     """A tight Gaussian anchor on log EI (posterior-scaled objective) holds EI at the anchor."""
     target = 1.3e9
     p = dataclasses.replace(problem, noise_sd=1e-3, anchor=(math.log(target), 1e-4))
-    r = fit(p, dataclasses.replace(SMOKE, optimizer=optimizer, correct_beta=False), seed=0, quiet=True)
+    r = fit(
+        p, dataclasses.replace(SMOKE, optimizer=optimizer, correct_beta=False), seed=0, quiet=True
+    )
     assert abs(r.EI / target - 1) < 2e-3
     assert "prior" in r.losses
 
@@ -175,7 +182,9 @@ def test_enrichment_cache_changes_no_bit(problem, monkeypatch):
     bit for bit (smoke-sized network and steps, the fast profile's enrichment and free vibrations)."""
     from bayespinn.pinn.enrich import _JetCache
 
-    s = dataclasses.replace(SMOKE, enrich=True, free_modes=3, resample_every=10, epochs=30, lbfgs_iters=5)
+    s = dataclasses.replace(
+        SMOKE, enrich=True, free_modes=3, resample_every=10, epochs=30, lbfgs_iters=5
+    )
     cached = fit(problem, s, seed=3, quiet=True)
     monkeypatch.setattr(_JetCache, "usable", staticmethod(lambda xi, tau: False))
     plain = fit(problem, s, seed=3, quiet=True)

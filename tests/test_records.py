@@ -85,8 +85,10 @@ def backed(tok: str, values: list[float]) -> bool:
     """Is the number `tok` (as written) one of `values` shown at its precision (or as a percentage)?"""
     x = float(tok.replace(",", "").replace("−", "-"))
     if "e" in tok:  # scientific: 3 significant digits agree
-        return any(v != 0 and abs(v - x) <= 0.5 * 10 ** (math.floor(math.log10(abs(x))) - _decimals(tok))
-                   for v in values)
+        return any(
+            v != 0 and abs(v - x) <= 0.5 * 10 ** (math.floor(math.log10(abs(x))) - _decimals(tok))
+            for v in values
+        )
     d = _decimals(tok)
     half = 0.5 * 10**-d + 1e-12
     for v in values:
@@ -139,7 +141,9 @@ def test_every_status_number_names_a_record():
             problems[b[:60]] = f"numbers without a record: {bad}"
         stale = [p for p in RECORD.findall(b) if record_is_fresh(p) is False]
         if stale and "stale" not in b:
-            problems[b[:60]] = f"quotes records computed by code that has changed since, without saying so: {stale}"
+            problems[b[:60]] = (
+                f"quotes records computed by code that has changed since, without saying so: {stale}"
+            )
     assert not problems, json.dumps(problems, indent=1)
 
 

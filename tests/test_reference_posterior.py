@@ -47,12 +47,17 @@ def _logpost(A, y, noise, prior_sd):
 def _matches(draws, mean, cov):
     sd = np.sqrt(np.diag(cov))
     d = draws.reshape(-1, draws.shape[-1])
-    return bool(np.all(np.abs(d.mean(0) - mean) < MEAN_TOL_SD * sd) and np.all(np.abs(d.std(0) / sd - 1) < SD_TOL_REL))
+    return bool(
+        np.all(np.abs(d.mean(0) - mean) < MEAN_TOL_SD * sd)
+        and np.all(np.abs(d.std(0) / sd - 1) < SD_TOL_REL)
+    )
 
 
 def test_sampler_recovers_analytic_posterior():
     A, y, noise, psd, mean, cov = _linear_gaussian()
-    ch = sample(_logpost(A, y, noise, psd), mean + 0.1, np.sqrt(np.diag(cov)), MCMCSettings(), seed=1)
+    ch = sample(
+        _logpost(A, y, noise, psd), mean + 0.1, np.sqrt(np.diag(cov)), MCMCSettings(), seed=1
+    )
     assert ch.steps >= 50 * ch.tau
     assert _matches(ch.draws, mean, cov)
 
@@ -78,8 +83,12 @@ def _grid_posterior(cfg, data):
     """Exact marginal posterior of EI by quadrature (sigma integrated out under the log-uniform prior)."""
     m = ModalModel(cfg.beam, cfg.vehicle, data.x, data.t, *data.weights, n_modes=40)
     le = math.log(cfg.beam.EI) + np.linspace(-0.3, 0.3, 6001)
-    rss = np.concatenate([np.sum((data.value[None] - m.predict(np.exp(c))) ** 2, 1) for c in np.array_split(le, 30)])
-    logp = stats.norm.logpdf(le, math.log(cfg.prior.EI_median), cfg.prior.EI_log_sd) - 0.5 * data.value.size * np.log(rss)
+    rss = np.concatenate(
+        [np.sum((data.value[None] - m.predict(np.exp(c))) ** 2, 1) for c in np.array_split(le, 30)]
+    )
+    logp = stats.norm.logpdf(
+        le, math.log(cfg.prior.EI_median), cfg.prior.EI_log_sd
+    ) - 0.5 * data.value.size * np.log(rss)
     w = np.exp(logp - logp.max())
     w /= w.sum()
     EI = np.exp(le)
@@ -94,13 +103,22 @@ def test_modal_posterior_matches_quadrature(snr, exeter):
     mean, sd = _grid_posterior(exeter, data)
     assert abs(p.EI.mean() - mean) < ISSUE_MEAN_TOL_SD * sd
     assert abs(p.EI.std() / sd - 1) < ISSUE_SD_TOL_REL
-    assert p.diagnostics["converged"] and p.diagnostics["rhat"] <= 1.01 and p.diagnostics["ess_bulk"] >= 400
+    assert (
+        p.diagnostics["converged"]
+        and p.diagnostics["rhat"] <= 1.01
+        and p.diagnostics["ess_bulk"] >= 400
+    )
 
 
 def test_snr_noise_prior_runs_2d(exeter):
     data = simulate(exeter, 20.0, 2)
-    p = modal_posterior(data, exeter, noise_prior=NoisePrior.build("snr", data.value, 20.0), seed=2,
-                        settings=MCMCSettings.for_profile("smoke"))
+    p = modal_posterior(
+        data,
+        exeter,
+        noise_prior=NoisePrior.build("snr", data.value, 20.0),
+        seed=2,
+        settings=MCMCSettings.for_profile("smoke"),
+    )
     assert "log sigma" in p.diagnostics["scheme"]
     true_sigma = np.sqrt(np.mean(data.value_true**2) / 100.0)
     assert abs(p.sigma.mean() / true_sigma - 1) < 0.3
@@ -108,8 +126,13 @@ def test_snr_noise_prior_runs_2d(exeter):
 
 def test_posterior_netcdf_round_trip(tmp_path):
     r = np.random.default_rng(0)
-    p = Posterior("bpinn", 1e9 + r.standard_normal((4, 50)), 1e-4 + r.random((4, 50)) * 1e-5,
-                  diagnostics={"rhat": 1.001, "converged": True}, runtime_s=3.5)
+    p = Posterior(
+        "bpinn",
+        1e9 + r.standard_normal((4, 50)),
+        1e-4 + r.random((4, 50)) * 1e-5,
+        diagnostics={"rhat": 1.001, "converged": True},
+        runtime_s=3.5,
+    )
     path = p.to_netcdf(tmp_path / "posterior_bpinn.nc")
     q = Posterior.from_netcdf(path)
     np.testing.assert_array_equal(q.EI, p.EI)
@@ -128,12 +151,24 @@ def test_coverage_negative_control_detects_a_wrong_truth():
     """The binomial acceptance region must reject a miscalibrated claim: intervals scored against a
     truth shifted by `NEGATIVE_CONTROL_SHIFT_SD` posterior sds cover far less than 90 %."""
     cfg = preset()
-    res = coverage_study("modal", cfg, 10.0, replicates=12, level=0.9, seed=1, progress=False,
-                         opts=RunOptions(profile="smoke"))
+    res = coverage_study(
+        "modal",
+        cfg,
+        10.0,
+        replicates=12,
+        level=0.9,
+        seed=1,
+        progress=False,
+        opts=RunOptions(profile="smoke"),
+    )
     lo, hi = binomial_acceptance(12, 0.9)
     assert lo <= res["hits"] <= hi
     k = NEGATIVE_CONTROL_SHIFT_SD
-    shifted = [r for r in res["records"] if r["interval"][0] <= r["EI_true"] * (1 + k * r["sd_rel_pct"] / 100) <= r["interval"][1]]
+    shifted = [
+        r
+        for r in res["records"]
+        if r["interval"][0] <= r["EI_true"] * (1 + k * r["sd_rel_pct"] / 100) <= r["interval"][1]
+    ]
     assert len(shifted) < lo
 
 
@@ -141,9 +176,23 @@ def _study(seed=0, truth="fixed", shift_sd=0.0, sd_factor=1.0, n=8):
     """A coverage study dict with made-up records: replicate i has relative error e_i and sd s_i."""
     r = np.random.default_rng(3)
     e, s = r.normal(0, 3, n), r.uniform(2, 4, n)
-    recs = [{"index": i, "rel_error_pct": float(e[i] + shift_sd * s[i]), "sd_rel_pct": float(sd_factor * s[i]),
-             "hit": bool(abs(e[i] + shift_sd * s[i]) < 1.645 * sd_factor * s[i])} for i in range(n)]
-    return {"method": "x", "seed": seed, "snr_db": 10.0, "case": "deflection", "truth": truth, "records": recs}
+    recs = [
+        {
+            "index": i,
+            "rel_error_pct": float(e[i] + shift_sd * s[i]),
+            "sd_rel_pct": float(sd_factor * s[i]),
+            "hit": bool(abs(e[i] + shift_sd * s[i]) < 1.645 * sd_factor * s[i]),
+        }
+        for i in range(n)
+    ]
+    return {
+        "method": "x",
+        "seed": seed,
+        "snr_db": 10.0,
+        "case": "deflection",
+        "truth": truth,
+        "records": recs,
+    }
 
 
 def test_paired_comparison_with_the_reference():
@@ -166,8 +215,15 @@ def test_coverage_replicates_share_datasets_across_runs():
     does not (negative control)."""
     cfg, opts = preset(), RunOptions(profile="smoke")
     a = coverage_study("modal", cfg, 10.0, replicates=3, seed=2, progress=False, opts=opts)
-    b = coverage_study("modal", cfg, 10.0, replicates=3, seed=2, progress=False,
-                       opts=RunOptions(profile="smoke", mcmc=MCMCSettings(n_walkers=24, n_groups=3)))
+    b = coverage_study(
+        "modal",
+        cfg,
+        10.0,
+        replicates=3,
+        seed=2,
+        progress=False,
+        opts=RunOptions(profile="smoke", mcmc=MCMCSettings(n_walkers=24, n_groups=3)),
+    )
     p = paired_with_reference(b, a)
     # measured: max |z| 0.024, sd ratios 1.017-1.034; the forced pairing below: max |z| 3.07
     assert p["datasets"] == 3 and p["max_abs_z"] < 0.15 and 0.85 < p["median_sd_ratio"] < 1.15

@@ -127,7 +127,11 @@ def _pinn_like(cfg, res) -> RunResult:
         "ensemble",
         ens_EI,
         np.full_like(ens_EI, truth["sigma"]),
-        info={"members": 5, "member_EI": ens_EI.ravel().tolist(), "warnings": ["the members disagree: test"]},
+        info={
+            "members": 5,
+            "member_EI": ens_EI.ravel().tolist(),
+            "warnings": ["the members disagree: test"],
+        },
         runtime_s=1.0,
         predictor=ModalPredictor(cfg, ens_EI.ravel(), 6),
     )
@@ -148,7 +152,9 @@ def test_verdict_identifiability_and_missing_predictor(defl, tmp_path):
         assert "Deep ensemble DISAGREES with the modal reference" in text
         assert "overconfident" in text
         assert "No posterior predictive for B-PINN" in text
-        assert "Deep ensemble: the members disagree: test" in text  # a method's own warnings are alerts
+        assert (
+            "Deep ensemble: the members disagree: test" in text
+        )  # a method's own warnings are alerts
     # the not-identified sentence sits above the tables, as an alert
     assert md.index("EI is not identified by these data") < md.index("## Data")
     assert '<div class="alert"' in html.split("<h2>Data</h2>")[0]

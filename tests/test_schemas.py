@@ -15,15 +15,25 @@ from bayespinn.uq.methods import RunOptions
 
 
 def schema(name: str) -> dict:
-    return json.loads(resources.files("bayespinn").joinpath(f"schemas/{name}.schema.json").read_text("utf-8"))
+    return json.loads(
+        resources.files("bayespinn").joinpath(f"schemas/{name}.schema.json").read_text("utf-8")
+    )
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     """A modal-only smoke run (seconds), written as a user's run is."""
     out = tmp_path_factory.mktemp("schemas") / "run"
-    run(preset(), methods=["modal"], snr_db=20.0, seed=0, out=out, opts=RunOptions(profile="smoke"),
-        argv=["test"], write_report=False)
+    run(
+        preset(),
+        methods=["modal"],
+        snr_db=20.0,
+        seed=0,
+        out=out,
+        opts=RunOptions(profile="smoke"),
+        argv=["test"],
+        write_report=False,
+    )
     return out
 
 
@@ -44,7 +54,9 @@ def test_committed_records_follow_their_schema(name):
     s = schema(name)
     for p in sorted(root.rglob(f"{name}.json")):
         doc = json.loads(p.read_text(encoding="utf-8"))
-        if "code_versions" not in json.loads((p.parent / "manifest.json").read_text(encoding="utf-8")):
+        if "code_versions" not in json.loads(
+            (p.parent / "manifest.json").read_text(encoding="utf-8")
+        ):
             continue  # written before the schemas: stale records, marked so where quoted
         jsonschema.validate(doc, s, cls=jsonschema.Draft202012Validator)
 

@@ -114,12 +114,27 @@ def test_table4_then_table5_modal(tmp_path):
     t5 = load(tmp_path / "table5.json")
     (row,) = t5["rows"]
     assert row["snr_db"] == 30.0 and row["same_posterior_as_table4"] is True
-    assert row["source"].startswith("stored by table4's run")  # the run folder's table5.json, no re-inference
+    assert row["source"].startswith(
+        "stored by table4's run"
+    )  # the run folder's table5.json, no re-inference
     # without the stored table the level is inferred again on table4's data: the same table comes back
     (tmp_path / "table4" / "modal_mcmc" / "snr30" / "table5.json").unlink()
-    study("table5.py", "--profile", "smoke", "--methods", "modal", "--snr", "30", "--out", str(tmp_path), "--quiet")
+    study(
+        "table5.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "modal",
+        "--snr",
+        "30",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
     (again,) = load(tmp_path / "table5.json")["rows"]
-    assert again["source"].startswith("data of table4") and again["same_posterior_as_table4"] is True
+    assert (
+        again["source"].startswith("data of table4") and again["same_posterior_as_table4"] is True
+    )
     assert again["table5"] == row["table5"]
     assert [round(x["t"], 2) for x in row["table5"]["rows"]] == [0.60, 1.22, 1.82]
     for x in row["table5"]["rows"]:
@@ -188,8 +203,21 @@ def test_coverage_modal(tmp_path):
     assert "paired_reference" not in rows["modal_mcmc"]
     assert "dataset by dataset" in (tmp_path / "coverage.md").read_text(encoding="utf-8")
     # a study carried on later: --resume reuses the 3 replicates of its file and runs one more
-    study("coverage.py", "--profile", "smoke", "--methods", "modal", "--snr", "30", "--replicates", "4",
-          "--resume", "--out", str(tmp_path), "--quiet")
+    study(
+        "coverage.py",
+        "--profile",
+        "smoke",
+        "--methods",
+        "modal",
+        "--snr",
+        "30",
+        "--replicates",
+        "4",
+        "--resume",
+        "--out",
+        str(tmp_path),
+        "--quiet",
+    )
     again = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}["modal_mcmc"]
     assert again["replicates"] == 4 and again["resumed_replicates"] == 3
     assert load(tmp_path / again["file"])["records"][:3] == full["records"]
@@ -309,8 +337,27 @@ def test_check_quadrature_accepts_the_modal_reference_and_rejects_a_wrong_one(tm
     """The issue's acceptance check on a real run folder; negative control: the same run checked
     against a bridge with a different true mass (so a different exact posterior) must fail."""
     run = tmp_path / "run"
-    r = subprocess.run([sys.executable, "-m", "bayespinn", "run", "--snr", "20", "--method", "modal", "--seed", "5",
-                        "--out", str(run), "--quiet"], cwd=REPO, capture_output=True, text=True, timeout=TIMEOUT_S)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "bayespinn",
+            "run",
+            "--snr",
+            "20",
+            "--method",
+            "modal",
+            "--seed",
+            "5",
+            "--out",
+            str(run),
+            "--quiet",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
     assert r.returncode == 0, r.stderr
     ok = study("check_quadrature.py", str(run))
     assert "meets the acceptance" in ok.stdout

@@ -65,21 +65,44 @@ class Measurements:
         """The rows where mask is true."""
         vt = None if self.value_true is None else self.value_true[mask]
         return Measurements(
-            self.x[mask], self.t[mask], self.value[mask], self.kind[mask], self.y[mask], self.sensor[mask], vt
+            self.x[mask],
+            self.t[mask],
+            self.value[mask],
+            self.kind[mask],
+            self.y[mask],
+            self.sensor[mask],
+            vt,
         )
 
     def with_values(self, value: np.ndarray) -> Measurements:
         """The same rows with new measured values (e.g. a perturbed copy)."""
-        return Measurements(self.x, self.t, np.asarray(value, float), self.kind, self.y, self.sensor, self.value_true)
+        return Measurements(
+            self.x,
+            self.t,
+            np.asarray(value, float),
+            self.kind,
+            self.y,
+            self.sensor,
+            self.value_true,
+        )
 
     def to_csv(self, path: str | Path) -> None:
         """Write the contract's measurement CSV atomically (a temp file renamed into place)."""
-        cols = list(REQUIRED) + ["y", "sensor"] + (["value_true"] if self.value_true is not None else [])
+        cols = (
+            list(REQUIRED)
+            + ["y", "sensor"]
+            + (["value_true"] if self.value_true is not None else [])
+        )
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(cols)
         for i in range(len(self)):
-            row = [repr(float(self.x[i])), repr(float(self.t[i])), repr(float(self.value[i])), self.kind[i]]
+            row = [
+                repr(float(self.x[i])),
+                repr(float(self.t[i])),
+                repr(float(self.value[i])),
+                self.kind[i],
+            ]
             row.append("" if math.isnan(self.y[i]) else repr(float(self.y[i])))
             row.append(self.sensor[i])
             if self.value_true is not None:
@@ -152,18 +175,26 @@ def read_csv(path: str | Path, length: float | None = None) -> Measurements:
     rows = list(csv.reader(io.StringIO(text)))
     rows = [r for r in rows if any(c.strip() for c in r)]
     if not rows:
-        raise InputError("--data", str(path), "a CSV with a header row and at least one observation")
+        raise InputError(
+            "--data", str(path), "a CSV with a header row and at least one observation"
+        )
     header = [c.strip() for c in rows[0]]
     for col in REQUIRED:
         if col not in header:
-            raise InputError(f"{name} header", ",".join(header), f"a column named '{col}' (need {', '.join(REQUIRED)})")
+            raise InputError(
+                f"{name} header",
+                ",".join(header),
+                f"a column named '{col}' (need {', '.join(REQUIRED)})",
+            )
     if len(rows) < 2:
         raise InputError("--data", str(path), "at least one observation row after the header")
     pos = {c: header.index(c) for c in header}
     cols: dict[str, list] = {c: [] for c in REQUIRED + OPTIONAL}
     for r, row in enumerate(rows[1:], start=2):
         if len(row) != len(header):
-            raise InputError(f"{name} row {r}", ",".join(row), f"{len(header)} cells like the header")
+            raise InputError(
+                f"{name} row {r}", ",".join(row), f"{len(header)} cells like the header"
+            )
         cell = {c: row[pos[c]].strip() for c in header}
         x = _float(cell["x"], r, "x", name)
         if x < 0 or (length is not None and x > length * (1 + 1e-12)):
@@ -175,11 +206,15 @@ def read_csv(path: str | Path, length: float | None = None) -> Measurements:
         v = _float(cell["value"], r, "value", name)
         kind = cell["kind"].lower()
         if kind not in KINDS:
-            raise InputError(f"{name} row {r}, column kind", cell["kind"], "'deflection' or 'strain'")
+            raise InputError(
+                f"{name} row {r}, column kind", cell["kind"], "'deflection' or 'strain'"
+            )
         ys = cell.get("y", "")
         if kind == "strain":
             if ys == "":
-                raise InputError(f"{name} row {r}, column y", ys, "the fibre distance y [m] on a strain row")
+                raise InputError(
+                    f"{name} row {r}, column y", ys, "the fibre distance y [m] on a strain row"
+                )
             y = _float(ys, r, "y", name)
         else:
             y = _float(ys, r, "y", name) if ys else math.nan

@@ -49,8 +49,17 @@ class FESettings:
 
 def _shape(xi: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     """Hermite shape functions N (4, P) and their second x-derivatives N'' (4, P) at local xi in [0, 1]."""
-    N = np.stack([1 - 3 * xi**2 + 2 * xi**3, h * (xi - 2 * xi**2 + xi**3), 3 * xi**2 - 2 * xi**3, h * (xi**3 - xi**2)])
-    Nxx = np.stack([(-6 + 12 * xi) / h**2, (-4 + 6 * xi) / h, (6 - 12 * xi) / h**2, (-2 + 6 * xi) / h])
+    N = np.stack(
+        [
+            1 - 3 * xi**2 + 2 * xi**3,
+            h * (xi - 2 * xi**2 + xi**3),
+            3 * xi**2 - 2 * xi**3,
+            h * (xi**3 - xi**2),
+        ]
+    )
+    Nxx = np.stack(
+        [(-6 + 12 * xi) / h**2, (-4 + 6 * xi) / h, (6 - 12 * xi) / h**2, (-2 + 6 * xi) / h]
+    )
     return N, Nxx
 
 
@@ -72,12 +81,20 @@ class FEBeam:
         h = L / ne
         self.h = h
         k = (EI / h**3) * np.array(
-            [[12, 6 * h, -12, 6 * h], [6 * h, 4 * h**2, -6 * h, 2 * h**2],
-             [-12, -6 * h, 12, -6 * h], [6 * h, 2 * h**2, -6 * h, 4 * h**2]]
+            [
+                [12, 6 * h, -12, 6 * h],
+                [6 * h, 4 * h**2, -6 * h, 2 * h**2],
+                [-12, -6 * h, 12, -6 * h],
+                [6 * h, 2 * h**2, -6 * h, 4 * h**2],
+            ]
         )
         m = (mu * h / 420) * np.array(
-            [[156, 22 * h, 54, -13 * h], [22 * h, 4 * h**2, 13 * h, -3 * h**2],
-             [54, 13 * h, 156, -22 * h], [-13 * h, -3 * h**2, -22 * h, 4 * h**2]]
+            [
+                [156, 22 * h, 54, -13 * h],
+                [22 * h, 4 * h**2, 13 * h, -3 * h**2],
+                [54, 13 * h, 156, -22 * h],
+                [-13 * h, -3 * h**2, -22 * h, 4 * h**2],
+            ]
         )
         nd = 2 * (ne + 1)
         K = np.zeros((nd, nd))
@@ -114,7 +131,9 @@ class FEBeam:
 
     def solve(self, vehicle: Vehicle, t_end: float) -> FEResponse:
         """Integrate a crossing from rest over [0, t_end] [s] with Newmark average acceleration."""
-        return self.solve_forced(lambda t: self.load_vector(vehicle, t), t_end, self.settings.n_steps)
+        return self.solve_forced(
+            lambda t: self.load_vector(vehicle, t), t_end, self.settings.n_steps
+        )
 
     @one_blas_thread
     def solve_forced(self, force, t_end: float, n: int) -> FEResponse:
@@ -152,7 +171,13 @@ class FEResponse:
     U: np.ndarray  # (n_steps + 1, ndof)
     V: np.ndarray
 
-    def sample(self, x: np.ndarray, t: np.ndarray, a_u: np.ndarray | float = 1.0, a_xx: np.ndarray | float = 0.0):
+    def sample(
+        self,
+        x: np.ndarray,
+        t: np.ndarray,
+        a_u: np.ndarray | float = 1.0,
+        a_xx: np.ndarray | float = 0.0,
+    ):
         """a_u u + a_xx u_xx at points (x [m], t [s]); arrays of one shape P."""
         x = np.asarray(x, float).ravel()
         t = np.asarray(t, float).ravel()
@@ -178,7 +203,9 @@ class FEResponse:
 
 
 @functools.lru_cache(maxsize=16)
-def solve_crossing(beam: Beam, vehicle: Vehicle, settings: FESettings | None = None, t_end: float | None = None):
+def solve_crossing(
+    beam: Beam, vehicle: Vehicle, settings: FESettings | None = None, t_end: float | None = None
+):
     """Cached FE solution of a crossing over [0, t_end] (default: the crossing time T)."""
     t_end = vehicle.duration(beam.length) if t_end is None else t_end
     return FEBeam(beam, settings).solve(vehicle, t_end)

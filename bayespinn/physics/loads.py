@@ -28,7 +28,9 @@ def gaussian_delta(s: np.ndarray, beta: float) -> np.ndarray:
     return np.exp(-((s / beta) ** 2)) / (beta * np.sqrt(np.pi))
 
 
-def distributed_load(beam: Beam, vehicle: Vehicle, x: np.ndarray, t: np.ndarray, beta: float) -> np.ndarray:
+def distributed_load(
+    beam: Beam, vehicle: Vehicle, x: np.ndarray, t: np.ndarray, beta: float
+) -> np.ndarray:
     """Right-hand side of Eq. 21, sum_j p_j delta_beta(x - v (t - t_j)) [N/m], for axles on the span.
 
     An axle contributes only while it is on the span, so the load vanishes before the first axle

@@ -107,13 +107,15 @@ class ModalModel:
         self.cos_basis = np.where(self.inside[:, None, :], np.cos(ang), 0.0) * self.shape[None]
         # transient terms only where they are non-zero: (indices, tau, shapes) per axle and state
         self.in_sets = [self._subset(self.inside[j], tau[j]) for j in range(tau.shape[0])]
-        self.after_sets = [self._subset(self.after[j], tau[j] - self.tau_e) for j in range(tau.shape[0])]
+        self.after_sets = [
+            self._subset(self.after[j], tau[j] - self.tau_e) for j in range(tau.shape[0])
+        ]
         # exact static part of point loads (EI * value), zero for Gaussian loads
         if beta is None:
             pos = np.clip(v * tau, 0.0, L)
-            st = a_u[None, :] * static_unit_deflection(x[None, :], pos, L) - a_xx[None, :] * static_unit_moment(
-                x[None, :], pos, L
-            )
+            st = a_u[None, :] * static_unit_deflection(x[None, :], pos, L) - a_xx[
+                None, :
+            ] * static_unit_moment(x[None, :], pos, L)
             self.static_EI = np.sum(vehicle.loads[:, None] * st * self.inside, axis=0)  # (P,)
         else:
             self.static_EI = np.zeros(P)

@@ -38,7 +38,9 @@ def _timed(fn: Callable[[], None], device: torch.device) -> float:
     return 1e3 * (time.perf_counter() - t0)
 
 
-def _rounds(steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int) -> dict[str, list[float]]:
+def _rounds(
+    steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int
+) -> dict[str, list[float]]:
     """ms of each call of each step function, `repeats` rounds round-robin after `warmup` calls each."""
     for fn in steps.values():
         for _ in range(warmup):
@@ -50,7 +52,9 @@ def _rounds(steps: dict[str, Callable[[], None]], device, warmup: int, repeats: 
     return times
 
 
-def _interleaved(steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int) -> dict[str, float]:
+def _interleaved(
+    steps: dict[str, Callable[[], None]], device, warmup: int, repeats: int
+) -> dict[str, float]:
     """Median ms per call of each step function, measured round-robin after `warmup` calls each."""
     return {k: statistics.median(v) for k, v in _rounds(steps, device, warmup, repeats).items()}
 
@@ -114,11 +118,18 @@ def bench_derivatives(
         return step
 
     steps = {"autograd": make_step("autograd", "autograd"), "taylor": make_step("taylor", "taylor")}
-    out: dict = {"points": points, "width": width, "depth": depth, "threads": torch.get_num_threads()}
+    out: dict = {
+        "points": points,
+        "width": width,
+        "depth": depth,
+        "threads": torch.get_num_threads(),
+    }
     want_compile = compile if compile is not None else True
     if want_compile:
         try:
-            cstep = make_step("compiled", "taylor-unfused", lambda f: torch.compile(f, dynamic=False))
+            cstep = make_step(
+                "compiled", "taylor-unfused", lambda f: torch.compile(f, dynamic=False)
+            )
             out["compile_s"] = _timed(cstep, dev) / 1e3
             steps["compiled"] = cstep
         except Exception as exc:  # pragma: no cover - depends on the installation
@@ -134,17 +145,25 @@ def bench_derivatives(
     net = PINN(width, depth, generators=[torch.Generator().manual_seed(seed)]).to(dev)
     a = net.jet(xi, tau, 4, 2, engine="taylor")
     b = net.jet(xi, tau, 4, 2, engine="autograd")
-    diffs = [
-        float((a.dx(k) - b.dx(k)).abs().max() / b.dx(k).abs().max()) for k in (0, 2, 4)
-    ] + [float((a.dt(k) - b.dt(k)).abs().max() / b.dt(k).abs().max()) for k in (1, 2)]
+    diffs = [float((a.dx(k) - b.dx(k)).abs().max() / b.dx(k).abs().max()) for k in (0, 2, 4)] + [
+        float((a.dt(k) - b.dt(k)).abs().max() / b.dt(k).abs().max()) for k in (1, 2)
+    ]
     out["max_rel_diff"] = max(diffs)
     return out
 
 
 def _member_settings(points: int, width: int, depth: int, optimizer: str) -> TrainSettings:
     return TrainSettings.for_profile(
-        "fast", optimizer=optimizer, width=width, depth=depth, n_pde=points, n_bc=max(points // 5, 2),
-        n_ic=max(points // 5, 1), compile=False, resample_every=0, lbfgs_iters=0,
+        "fast",
+        optimizer=optimizer,
+        width=width,
+        depth=depth,
+        n_pde=points,
+        n_bc=max(points // 5, 2),
+        n_ic=max(points // 5, 1),
+        compile=False,
+        resample_every=0,
+        lbfgs_iters=0,
     )
 
 
@@ -154,8 +173,13 @@ def _train_member_steps(task: tuple) -> float:
 
     m, steps, points, width, depth, optimizer = task
     t0 = time.perf_counter()
-    tr = _Trainer(_deflection_problem(), _member_settings(points, width, depth, optimizer),
-                  np.random.SeedSequence(0, spawn_key=(m,)), 1, torch.device("cpu"))
+    tr = _Trainer(
+        _deflection_problem(),
+        _member_settings(points, width, depth, optimizer),
+        np.random.SeedSequence(0, spawn_key=(m,)),
+        1,
+        torch.device("cpu"),
+    )
     for _ in range(steps):
         tr.adam_step()
     return time.perf_counter() - t0
@@ -204,7 +228,9 @@ def bench_ensemble(
     dev = torch.device(device)
     prob = _deflection_problem()
     s = _member_settings(points, width, depth, optimizer)
-    seq = [_Trainer(prob, s, np.random.SeedSequence(0, spawn_key=(m,)), 1, dev) for m in range(members)]
+    seq = [
+        _Trainer(prob, s, np.random.SeedSequence(0, spawn_key=(m,)), 1, dev) for m in range(members)
+    ]
     bat = _Trainer(prob, s, 0, members, dev)
 
     def sequential():
@@ -229,13 +255,24 @@ def bench_ensemble(
                     _train_member_steps, tasks, desc="bench members", progress=False
                 ),
             },
-            dev, 0, max(1, parallel_rounds),
+            dev,
+            0,
+            max(1, parallel_rounds),
         )
         seq_s, par_s = [1e-3 * v for v in ms["seq"]], [1e-3 * v for v in ms["par"]]
         t_seq, t_par = statistics.median(seq_s), statistics.median(par_s)
-        out.update(workers=n, parallel_steps=parallel_steps, parallel_rounds=len(seq_s), sequential_s=t_seq,
-                   parallel_s=t_par, sequential_rounds_s=seq_s, parallel_rounds_s=par_s,
-                   parallel_ms_per_epoch=1e3 * t_par / parallel_steps, parallel_speedup=t_seq / t_par,
-                   batched_speedup=out["speedup"], speedup=t_seq / t_par)
+        out.update(
+            workers=n,
+            parallel_steps=parallel_steps,
+            parallel_rounds=len(seq_s),
+            sequential_s=t_seq,
+            parallel_s=t_par,
+            sequential_rounds_s=seq_s,
+            parallel_rounds_s=par_s,
+            parallel_ms_per_epoch=1e3 * t_par / parallel_steps,
+            parallel_speedup=t_seq / t_par,
+            batched_speedup=out["speedup"],
+            speedup=t_seq / t_par,
+        )
     out["together"] = "parallel processes" if "parallel_speedup" in out else "batched"
     return out

@@ -67,7 +67,12 @@ class _JetCache:
         key = (id(xi), id(tau), kx, kt)
         hit = self.items.get(key)
         # the entry holds its tensors, so their ids cannot be reused while it lives
-        if hit is not None and hit[0] is xi and hit[1] is tau and hit[2] == (xi._version, tau._version):
+        if (
+            hit is not None
+            and hit[0] is xi
+            and hit[1] is tau
+            and hit[2] == (xi._version, tau._version)
+        ):
             self.items.move_to_end(key)
             return hit[3]
         jet = make()
@@ -125,7 +130,11 @@ class StaticEnrichment:
         def comp(mx: int, mt: int) -> Tensor:
             return ((g * k**mx) * x_parts[mx % 4] * A[mt]).sum(-1, keepdim=True)
 
-        return Jet(comp(0, 0), tuple(comp(m, 0) for m in range(1, kx + 1)), tuple(comp(0, m) for m in range(1, kt + 1)))
+        return Jet(
+            comp(0, 0),
+            tuple(comp(m, 0) for m in range(1, kx + 1)),
+            tuple(comp(0, m) for m in range(1, kt + 1)),
+        )
 
 
 @dataclass(frozen=True)
@@ -165,7 +174,9 @@ class FreeVibration:
         """True when each feature solves the homogeneous beam equation exactly (zero damping)."""
         return self.damping == 0.0
 
-    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor, detach: bool = True) -> Jet:
+    def jet(
+        self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor, detach: bool = True
+    ) -> Jet:
         """Jet of the features at points (M, N): components (M, N, n_features).
 
         ``log_ei`` (M,) sets the frequency; with ``detach=False`` the jet is differentiable in it (the
@@ -206,8 +217,11 @@ class FreeVibration:
             return k**m * x_parts[m % 4]
 
         X0 = xfac(0)
-        return Jet(cols(X0, vals), tuple(cols(xfac(m), vals) for m in range(1, kx + 1)),
-                   tuple(cols(X0, d) for d in (d1s, d2s)[:kt]))
+        return Jet(
+            cols(X0, vals),
+            tuple(cols(xfac(m), vals) for m in range(1, kx + 1)),
+            tuple(cols(X0, d) for d in (d1s, d2s)[:kt]),
+        )
 
     def lowest(self) -> FreeVibration:
         """The first mode alone: its columns are the trailing 2 E columns of this one's (same order)."""

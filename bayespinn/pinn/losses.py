@@ -76,15 +76,25 @@ def pde_scale(pt: ProblemTensors) -> float | Tensor:
     return pt.beta * math.sqrt(math.pi) if pt.pde_norm == "peak" else 1.0
 
 
-def pde_residual_from_jet(j: Jet, ei_ratio: Tensor, xi: Tensor, tau: Tensor, pt: ProblemTensors,
-                          images: bool = False) -> Tensor:
+def pde_residual_from_jet(
+    j: Jet, ei_ratio: Tensor, xi: Tensor, tau: Tensor, pt: ProblemTensors, images: bool = False
+) -> Tensor:
     """R (M, N) from the jet of w at the PDE points (see module docstring)."""
-    r = pt.stiffness * ei_ratio.unsqueeze(-1) * j.dx(4) + pt.inertia * j.dt(2) - moving_load(xi, tau, pt, images)
+    r = (
+        pt.stiffness * ei_ratio.unsqueeze(-1) * j.dx(4)
+        + pt.inertia * j.dt(2)
+        - moving_load(xi, tau, pt, images)
+    )
     return r * pde_scale(pt)
 
 
 def pde_residual(
-    model: PINN, xi: Tensor, tau: Tensor, pt: ProblemTensors, engine: str = "taylor", images: bool = False
+    model: PINN,
+    xi: Tensor,
+    tau: Tensor,
+    pt: ProblemTensors,
+    engine: str = "taylor",
+    images: bool = False,
 ) -> Tensor:
     """R (M, N): non-dimensional residual of the beam equation divided by the peak intensity of a
     Gaussian load, 1 / (sqrt(pi) beta / L) (see module docstring)."""
@@ -116,8 +126,9 @@ def data_residual(model: PINN, pt: ProblemTensors, engine: str = "taylor") -> Te
     return data_prediction(j, pt) - pt.value
 
 
-def field_jets(model: PINN, pt: ProblemTensors, col: Collocation, engine: str = "taylor",
-               basis: bool = False) -> dict[str, Jet]:
+def field_jets(
+    model: PINN, pt: ProblemTensors, col: Collocation, engine: str = "taylor", basis: bool = False
+) -> dict[str, Jet]:
     """Jets of w (or, with ``basis``, of the output layer's basis functions) at every point set."""
     f = model.basis_jet if basis else model.jet
     return {
@@ -128,8 +139,13 @@ def field_jets(model: PINN, pt: ProblemTensors, col: Collocation, engine: str = 
     }
 
 
-def terms_from_jets(jets: dict[str, Jet], ei_ratio: Tensor, pt: ProblemTensors, col: Collocation,
-                    images: bool = False) -> dict[str, Tensor]:
+def terms_from_jets(
+    jets: dict[str, Jet],
+    ei_ratio: Tensor,
+    pt: ProblemTensors,
+    col: Collocation,
+    images: bool = False,
+) -> dict[str, Tensor]:
     """The four loss terms per member (M,) from the jets of w at each point set."""
     return {
         "pde": (pde_residual_from_jet(jets["pde"], ei_ratio, *col.pde, pt, images) ** 2).mean(-1),

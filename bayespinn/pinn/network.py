@@ -92,7 +92,9 @@ class PINN(nn.Module):
     ):
         super().__init__()
         if width < 1 or depth < 1 or members < 1:
-            raise ValueError(f"width, depth and members must be >= 1, got {width}, {depth}, {members}")
+            raise ValueError(
+                f"width, depth and members must be >= 1, got {width}, {depth}, {members}"
+            )
         self.width, self.depth, self.members = int(width), int(depth), int(members)
         self.hard_bc, self.hard_ic = bool(hard_bc), bool(hard_ic)
         if generators is None:
@@ -105,11 +107,18 @@ class PINN(nn.Module):
         self.biases = nn.ParameterList()
         for d_in, d_out in zip(sizes[:-1], sizes[1:], strict=True):
             std = math.sqrt(2.0 / (d_in + d_out))  # Glorot normal
-            w = torch.stack([torch.randn(d_in, d_out, generator=g, dtype=torch.float64) * std for g in generators])
+            w = torch.stack(
+                [
+                    torch.randn(d_in, d_out, generator=g, dtype=torch.float64) * std
+                    for g in generators
+                ]
+            )
             self.weights.append(nn.Parameter(w.to(dtype)))
             self.biases.append(nn.Parameter(torch.zeros(members, 1, d_out, dtype=dtype)))
         if self.time_frequency is not None:
-            with torch.no_grad():  # the oscillating features start unused (their w_tt would be huge)
+            with (
+                torch.no_grad()
+            ):  # the oscillating features start unused (their w_tt would be huge)
                 self.weights[0][:, 2:] = 0.0
         init = torch.as_tensor(log_ei_init, dtype=torch.float64).expand(members).clone()
         self.log_ei = nn.Parameter(init.to(dtype))
@@ -142,10 +151,16 @@ class PINN(nn.Module):
             d = [-s, -c, s, c]  # d^k cos(pi xi) / dxi^k = pi^k d[k-1]
             feats.append((c, [math.pi**k * d[k - 1] for k in range(1, kx + 1)], [None] * kt))
         else:
-            feats.append((2.0 * xi - 1.0, [zero_b + 2.0] + [None] * (kx - 1) if kx else [], [None] * kt))
-        feats.append((2.0 * tau - 1.0, [None] * kx, [zero_b + 2.0] + [None] * (kt - 1) if kt else []))
+            feats.append(
+                (2.0 * xi - 1.0, [zero_b + 2.0] + [None] * (kx - 1) if kx else [], [None] * kt)
+            )
+        feats.append(
+            (2.0 * tau - 1.0, [None] * kx, [zero_b + 2.0] + [None] * (kt - 1) if kt else [])
+        )
         if self.time_frequency is not None:
-            W = (self.time_frequency * torch.exp(0.5 * self.log_ei.detach())).unsqueeze(-1)  # (M, 1)
+            W = (self.time_frequency * torch.exp(0.5 * self.log_ei.detach())).unsqueeze(
+                -1
+            )  # (M, 1)
             sn, cs = torch.sin(W * tau), torch.cos(W * tau)
             feats.append((sn, [None] * kx, [W * cs, -W * W * sn][:kt]))
             feats.append((cs, [None] * kx, [-W * sn, -W * W * cs][:kt]))
@@ -155,7 +170,9 @@ class PINN(nn.Module):
                 return None
             full = any(p is not None and p.shape[-1] != 1 for p in parts)
             shape = xi.shape if full else (M, 1)
-            return torch.stack([xi.new_zeros(shape) if p is None else p.expand(shape) for p in parts], dim=-1)
+            return torch.stack(
+                [xi.new_zeros(shape) if p is None else p.expand(shape) for p in parts], dim=-1
+            )
 
         value = torch.stack([f[0] for f in feats], dim=-1)
         xs = tuple(comp([f[1][k] for f in feats]) for k in range(kx))
@@ -171,7 +188,10 @@ class PINN(nn.Module):
             a = math.pi * xi
             s, c = torch.sin(a), torch.cos(a)
             derivs = [c, -s, -c, s]
-            env = product_jet(env, Jet(s, tuple(math.pi**k * derivs[k - 1] for k in range(1, kx + 1)), (None,) * kt))
+            env = product_jet(
+                env,
+                Jet(s, tuple(math.pi**k * derivs[k - 1] for k in range(1, kx + 1)), (None,) * kt),
+            )
         if self.hard_ic:
             r = tau / HARD_IC_TAU
             e = torch.exp(-r * r)
@@ -211,7 +231,9 @@ class PINN(nn.Module):
             out = product_jet(env, out)
         return out
 
-    def basis_jet(self, xi: Tensor, tau: Tensor, kx: int = 0, kt: int = 0, engine: str = "taylor") -> Jet:
+    def basis_jet(
+        self, xi: Tensor, tau: Tensor, kx: int = 0, kt: int = 0, engine: str = "taylor"
+    ) -> Jet:
         """Jet of the basis functions that the output layer combines, components (M, N, width + 1).
 
         w = sum_j c_j phi_j with c = `head` (the output weights, then the output bias); phi_j is the
@@ -221,7 +243,9 @@ class PINN(nn.Module):
         if engine not in ("taylor", "taylor-unfused"):
             raise ValueError(f"basis_jet needs a Taylor engine, got {engine!r}")
         inp = self._input_jet(xi, tau, kx, kt)
-        H, kx_, kt_ = hidden_stack(list(self.weights)[:-1], list(self.biases)[:-1], inp, fused=engine == "taylor")
+        H, kx_, kt_ = hidden_stack(
+            list(self.weights)[:-1], list(self.biases)[:-1], inp, fused=engine == "taylor"
+        )
         M, K, N, _ = H.shape
         ones = torch.zeros(M, K, N, 1, dtype=H.dtype, device=H.device)
         ones[:, 0] = 1.0
@@ -229,7 +253,9 @@ class PINN(nn.Module):
         env = self._envelope(xi, tau, kx, kt)
         if env is not None:
             e = lambda c: None if c is None else c.unsqueeze(-1)  # noqa: E731
-            B = product_jet(Jet(e(env.value), tuple(e(c) for c in env.x), tuple(e(c) for c in env.t)), B)
+            B = product_jet(
+                Jet(e(env.value), tuple(e(c) for c in env.x), tuple(e(c) for c in env.t)), B
+            )
         if self.oscillator is not None:
             B = self._modulate(B, tau, kx, kt)
         if self.extras:
@@ -238,25 +264,34 @@ class PINN(nn.Module):
 
     def _modulate(self, B: Jet, tau: Tensor, kx: int, kt: int) -> Jet:
         """[B, B sin(W tau), B cos(W tau)] along the feature axis (see the module docstring)."""
-        W = (self.oscillator * torch.exp(0.5 * self.log_ei.detach())).view(-1, 1, 1).to(tau.dtype)  # (M, 1, 1)
+        W = (
+            (self.oscillator * torch.exp(0.5 * self.log_ei.detach())).view(-1, 1, 1).to(tau.dtype)
+        )  # (M, 1, 1)
         a = W * tau.unsqueeze(-1)
         sn, cs = torch.sin(a), torch.cos(a)
-        mods = [product_jet(B, Jet(v, (None,) * kx, (d1, d2)[:kt]))
-                for v, d1, d2 in ((sn, W * cs, -W * W * sn), (cs, -W * sn, -W * W * cs))]
+        mods = [
+            product_jet(B, Jet(v, (None,) * kx, (d1, d2)[:kt]))
+            for v, d1, d2 in ((sn, W * cs, -W * W * sn), (cs, -W * sn, -W * W * cs))
+        ]
         return cat_jets(B, *mods)
 
     @property
     def free_vibration(self) -> FreeVibration | None:
         """The `FreeVibration` extra, if any: it is always the last extra, so its features are the
         trailing `FreeVibration.n_features` columns of `basis_jet` and of `head`."""
-        return self.extras[-1] if self.extras and isinstance(self.extras[-1], FreeVibration) else None
+        return (
+            self.extras[-1] if self.extras and isinstance(self.extras[-1], FreeVibration) else None
+        )
 
     @property
     def head(self) -> Tensor:
         """The output layer as one coefficient matrix c (M, D): weights, then bias (D = width + 1),
         then with ``oscillator`` the sin- and cos-modulated coefficients (2 (width + 1) more), then the
         coefficients of the ``extras``."""
-        return torch.cat([self.weights[-1][..., 0], self.biases[-1][..., 0], self.osc_head, self.extra_head], dim=-1)
+        return torch.cat(
+            [self.weights[-1][..., 0], self.biases[-1][..., 0], self.osc_head, self.extra_head],
+            dim=-1,
+        )
 
     @torch.no_grad()
     def set_head(self, c: Tensor) -> None:
@@ -274,10 +309,20 @@ class PINN(nn.Module):
 
     def member(self, m: int) -> PINN:
         """A single-member copy of member m (same weights, dtype and options)."""
-        one = PINN(self.width, self.depth, members=1, hard_bc=self.hard_bc, hard_ic=self.hard_ic,
-                   time_frequency=self.time_frequency, oscillator=self.oscillator, extras=self.extras,
-                   dtype=self.log_ei.dtype)
-        one.load_state_dict({k: v[m : m + 1].detach().clone() for k, v in self.state_dict().items()})
+        one = PINN(
+            self.width,
+            self.depth,
+            members=1,
+            hard_bc=self.hard_bc,
+            hard_ic=self.hard_ic,
+            time_frequency=self.time_frequency,
+            oscillator=self.oscillator,
+            extras=self.extras,
+            dtype=self.log_ei.dtype,
+        )
+        one.load_state_dict(
+            {k: v[m : m + 1].detach().clone() for k, v in self.state_dict().items()}
+        )
         return one.to(self.log_ei.device)
 
     def forward(self, xi: Tensor, tau: Tensor) -> Tensor:

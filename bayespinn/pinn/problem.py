@@ -97,7 +97,9 @@ class Problem:
         data = self.data if isinstance(self.data, tuple | list) else (self.data,)
         first = data[0]
         for d in data[1:]:
-            if len(d) != len(first) or not (np.array_equal(d.x, first.x) and np.array_equal(d.t, first.t)):
+            if len(d) != len(first) or not (
+                np.array_equal(d.x, first.x) and np.array_equal(d.t, first.t)
+            ):
                 raise ValueError("all Measurements of a Problem must share the same x and t")
         object.__setattr__(self, "data", tuple(data) if len(data) > 1 else first)
         if self.beta is not None and not (self.beta > 0 and math.isfinite(self.beta)):
@@ -156,11 +158,19 @@ class Problem:
         d = self.vehicle.delays
         times = np.concatenate([d, d + self.beam.length / self.vehicle.speed]) / sc.T
         events = tuple(sorted({round(float(e), 12) for e in times if 0.0 <= e < 1.0}))
-        return FreeVibration(events=events, modes=int(modes), frequency=sc.time_frequency,
-                             damping=float(self.beam.damping_ratio))
+        return FreeVibration(
+            events=events,
+            modes=int(modes),
+            frequency=sc.time_frequency,
+            damping=float(self.beam.damping_ratio),
+        )
 
     def tensors(
-        self, members: int, device: str | torch.device = "cpu", dtype=torch.float32, beta_rel: float = DEFAULT_BETA_REL,
+        self,
+        members: int,
+        device: str | torch.device = "cpu",
+        dtype=torch.float32,
+        beta_rel: float = DEFAULT_BETA_REL,
         pde_norm: str = "peak",
     ) -> ProblemTensors:
         """Non-dimensional torch tensors for M members (data broadcast when shared)."""

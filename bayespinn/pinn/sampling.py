@@ -66,7 +66,14 @@ def sample_collocation(
         pde_x.append(torch.cat(xs))
         pde_t.append(torch.cat(ts))
         half = n_bc // 2
-        bc_x.append(torch.cat([torch.zeros(half, dtype=torch.float64), torch.ones(n_bc - half, dtype=torch.float64)]))
+        bc_x.append(
+            torch.cat(
+                [
+                    torch.zeros(half, dtype=torch.float64),
+                    torch.ones(n_bc - half, dtype=torch.float64),
+                ]
+            )
+        )
         bc_t.append(torch.rand(n_bc, generator=g, dtype=torch.float64))
         ic_x.append(torch.rand(n_ic, generator=g, dtype=torch.float64))
         ic_t.append(torch.zeros(n_ic, dtype=torch.float64))

@@ -112,7 +112,16 @@ class TrainSettings:
     max_log_ei: float = 3.0
 
     def __post_init__(self) -> None:
-        pos_int = ("width", "depth", "n_pde", "n_bc", "n_ic", "lbfgs_chunk", "checkpoint_every", "log_every")
+        pos_int = (
+            "width",
+            "depth",
+            "n_pde",
+            "n_bc",
+            "n_ic",
+            "lbfgs_chunk",
+            "checkpoint_every",
+            "log_every",
+        )
         for name in pos_int:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -121,7 +130,15 @@ class TrainSettings:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 0")
-        for name in ("lr", "lr_final", "lr_ei_factor", "beta_rel", "max_log_ei", "beta_start", "beta_anneal"):
+        for name in (
+            "lr",
+            "lr_final",
+            "lr_ei_factor",
+            "beta_rel",
+            "max_log_ei",
+            "beta_start",
+            "beta_anneal",
+        ):
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected a finite number > 0")
@@ -135,7 +152,9 @@ class TrainSettings:
                 "expected beta_start >= 1 and beta_anneal in (0, 1]"
             )
         if not 0.0 <= self.load_fraction < 1.0:
-            raise ValueError(f"TrainSettings.load_fraction: got {self.load_fraction!r}, expected a number in [0, 1)")
+            raise ValueError(
+                f"TrainSettings.load_fraction: got {self.load_fraction!r}, expected a number in [0, 1)"
+            )
         choices = {
             "schedule": SCHEDULES,
             "optimizer": ("adam", "varpro"),
@@ -147,10 +166,14 @@ class TrainSettings:
         }
         for name, allowed in choices.items():
             if getattr(self, name) not in allowed:
-                raise ValueError(f"TrainSettings.{name}: got {getattr(self, name)!r}, expected one of {allowed}")
+                raise ValueError(
+                    f"TrainSettings.{name}: got {getattr(self, name)!r}, expected one of {allowed}"
+                )
         if self.enrich and not self.images:
-            raise ValueError("TrainSettings.enrich: got True with images=False, expected images=True "
-                             "(the enrichment solves the Gaussian loads with their images)")
+            raise ValueError(
+                "TrainSettings.enrich: got True with images=False, expected images=True "
+                "(the enrichment solves the Gaussian loads with their images)"
+            )
         if self.n_bc < 2:
             raise ValueError(f"TrainSettings.n_bc: got {self.n_bc}, expected >= 2 (both supports)")
 
@@ -158,7 +181,9 @@ class TrainSettings:
     def for_profile(cls, name: str = "fast", **overrides) -> TrainSettings:
         """The named profile ('smoke', 'fast', 'paper'), with optional field overrides."""
         if name not in PROFILES:
-            raise ValueError(f"unknown training profile {name!r}; expected one of {', '.join(PROFILE_NAMES)}")
+            raise ValueError(
+                f"unknown training profile {name!r}; expected one of {', '.join(PROFILE_NAMES)}"
+            )
         return replace(PROFILES[name], **overrides)
 
     def learning_rate(self, i: int) -> float:
@@ -189,14 +214,46 @@ class TrainSettings:
 
 PROFILES: dict[str, TrainSettings] = {
     "smoke": TrainSettings(
-        profile="smoke", width=16, depth=2, epochs=60, lr=1e-2, lr_final=1e-3, n_pde=200, n_bc=40,
-        n_ic=40, resample_every=20, lbfgs_iters=20, lbfgs_chunk=10, checkpoint_every=20, log_every=10,
+        profile="smoke",
+        width=16,
+        depth=2,
+        epochs=60,
+        lr=1e-2,
+        lr_final=1e-3,
+        n_pde=200,
+        n_bc=40,
+        n_ic=40,
+        resample_every=20,
+        lbfgs_iters=20,
+        lbfgs_chunk=10,
+        checkpoint_every=20,
+        log_every=10,
     ),
     "fast": TrainSettings(),
     "paper": TrainSettings(
-        profile="paper", optimizer="adam", width=64, depth=5, epochs=60_000, lr=1e-2, lr_final=0.7e-2, schedule="paper",
-        n_pde=2500, n_bc=2000, n_ic=1000, load_fraction=0.0, resample_every=0, lbfgs_iters=0,
-        weighting="adaptive", images=False, time_features=False, pde_norm="peak", oscillator=False, enrich=False, free_modes=0, beta_rel=0.025,
-        checkpoint_every=2000, log_every=200,
+        profile="paper",
+        optimizer="adam",
+        width=64,
+        depth=5,
+        epochs=60_000,
+        lr=1e-2,
+        lr_final=0.7e-2,
+        schedule="paper",
+        n_pde=2500,
+        n_bc=2000,
+        n_ic=1000,
+        load_fraction=0.0,
+        resample_every=0,
+        lbfgs_iters=0,
+        weighting="adaptive",
+        images=False,
+        time_features=False,
+        pde_norm="peak",
+        oscillator=False,
+        enrich=False,
+        free_modes=0,
+        beta_rel=0.025,
+        checkpoint_every=2000,
+        log_every=200,
     ),
 }

@@ -194,7 +194,9 @@ class _FusedTanhJet(torch.autograd.Function):
             if k >= 3:
                 z3 = z[:, off + 2]
                 z1z2 = z1 * z2
-                torch.addcmul(torch.addcmul(d1 * z3, d2, z1z2, value=3.0), d3, z1s * z1, out=h[:, off + 2])
+                torch.addcmul(
+                    torch.addcmul(d1 * z3, d2, z1z2, value=3.0), d3, z1s * z1, out=h[:, off + 2]
+                )
             if k >= 4:
                 z4 = z[:, off + 3]
                 inner = torch.addcmul(4.0 * z1 * z3, z2, z2, value=3.0)
@@ -289,7 +291,9 @@ def linear_stack(H: Tensor, kx: int, kt: int, weight: Tensor, bias: Tensor) -> J
     return Jet(j.value + bias, j.x, j.t)
 
 
-def mlp_jet(weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet, *, fused: bool = True) -> Jet:
+def mlp_jet(
+    weights: Sequence[Tensor], biases: Sequence[Tensor], jet: Jet, *, fused: bool = True
+) -> Jet:
     """Propagate an input jet through tanh hidden layers and a linear output layer.
 
     Parameters
@@ -316,13 +320,22 @@ def cat_jets(*jets: Jet) -> Jet:
             return None
         full = [j.value if p is None else p for j, p in zip(jets, parts, strict=True)]
         shape = lambda j: (*first.shape[:-1], j.value.shape[-1])  # noqa: E731
-        return torch.cat([torch.zeros(shape(j), dtype=first.dtype, device=first.device) if p is None
-                          else f.to(first.dtype).expand(shape(j)) for j, p, f in zip(jets, parts, full, strict=True)],
-                         dim=-1)
+        return torch.cat(
+            [
+                torch.zeros(shape(j), dtype=first.dtype, device=first.device)
+                if p is None
+                else f.to(first.dtype).expand(shape(j))
+                for j, p, f in zip(jets, parts, full, strict=True)
+            ],
+            dim=-1,
+        )
 
     kx, kt = len(jets[0].x), len(jets[0].t)
-    return Jet(cat([j.value for j in jets]), tuple(cat([j.x[k] for j in jets]) for k in range(kx)),
-               tuple(cat([j.t[k] for j in jets]) for k in range(kt)))
+    return Jet(
+        cat([j.value for j in jets]),
+        tuple(cat([j.x[k] for j in jets]) for k in range(kx)),
+        tuple(cat([j.t[k] for j in jets]) for k in range(kt)),
+    )
 
 
 def contract_jet(basis: Jet, c: Tensor) -> Jet:
@@ -343,7 +356,12 @@ def product_jet(a: Jet, b: Jet) -> Jet:
 
     def direction(axis: str, order: int) -> tuple[Tensor | None, ...]:
         return tuple(
-            _add(*(_mul(float(binom[n][k]), comp(a, axis, k), comp(b, axis, n - k)) for k in range(n + 1)))
+            _add(
+                *(
+                    _mul(float(binom[n][k]), comp(a, axis, k), comp(b, axis, n - k))
+                    for k in range(n + 1)
+                )
+            )
             for n in range(1, order + 1)
         )
 
@@ -351,7 +369,9 @@ def product_jet(a: Jet, b: Jet) -> Jet:
 
 
 # ----------------------------------------------------------------------------- reference
-def autograd_jet(fn: Callable[[Tensor, Tensor], Tensor], x: Tensor, t: Tensor, kx: int, kt: int) -> Jet:
+def autograd_jet(
+    fn: Callable[[Tensor, Tensor], Tensor], x: Tensor, t: Tensor, kx: int, kt: int
+) -> Jet:
     """Reference derivatives by nested ``torch.autograd.grad`` (create_graph=True).
 
     Parameters

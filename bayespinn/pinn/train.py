@@ -103,22 +103,37 @@ def _build_model(problem: Problem, s: TrainSettings, members: int, generators=No
         extras.append(problem.enrichment(s.beta_rel))
     if s.free_modes:
         extras.append(problem.free_vibration(s.free_modes))
-    return PINN(s.width, s.depth, members=members, generators=generators, hard_bc=s.hard_bc, hard_ic=s.hard_ic,
-                time_frequency=tf, oscillator=osc, extras=extras, dtype=_dtype(s.dtype))
+    return PINN(
+        s.width,
+        s.depth,
+        members=members,
+        generators=generators,
+        hard_bc=s.hard_bc,
+        hard_ic=s.hard_ic,
+        time_frequency=tf,
+        oscillator=osc,
+        extras=extras,
+        dtype=_dtype(s.dtype),
+    )
 
 
 def _dtype(name: str) -> torch.dtype:
     return torch.float64 if name == "float64" else torch.float32
 
 
-def _member_seeds(seed: int | np.random.SeedSequence, members: int, first: int = 0) -> list[tuple[int, int]]:
+def _member_seeds(
+    seed: int | np.random.SeedSequence, members: int, first: int = 0
+) -> list[tuple[int, int]]:
     """(init seed, collocation seed) for members first .. first + members - 1: member m's streams depend
     on (seed, m) only."""
     root = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(int(seed))
     out = []
     for m in range(first, first + members):
         key = tuple(root.spawn_key) + (m,)
-        s = [np.random.SeedSequence(root.entropy, spawn_key=key + (k,)).generate_state(2, np.uint64) for k in (0, 1)]
+        s = [
+            np.random.SeedSequence(root.entropy, spawn_key=key + (k,)).generate_state(2, np.uint64)
+            for k in (0, 1)
+        ]
         out.append(tuple(int(a[0] >> np.uint64(1)) for a in s))
     return out
 
@@ -138,8 +153,15 @@ def _want_compile(settings: TrainSettings, device: torch.device) -> bool:
 class _Trainer:
     """State of one fit: network, points, optimisers. `fit` drives it."""
 
-    def __init__(self, problem: Problem, s: TrainSettings, seed, members: int, device: torch.device,
-                 first_member: int = 0):
+    def __init__(
+        self,
+        problem: Problem,
+        s: TrainSettings,
+        seed,
+        members: int,
+        device: torch.device,
+        first_member: int = 0,
+    ):
         self.problem, self.s, self.M, self.device = problem, s, members, device
         self.dtype = _dtype(s.dtype)
         seeds = _member_seeds(seed, members, first_member)
@@ -147,7 +169,9 @@ class _Trainer:
         self.col_gens = [torch.Generator().manual_seed(b) for _, b in seeds]
         self.model = _build_model(problem, s, members, init_gens).to(device)
         self.beta = problem.beta_for(s.beta_rel)
-        self.pt = problem.tensors(members, device, self.dtype, beta_rel=s.beta_rel, pde_norm=s.pde_norm)
+        self.pt = problem.tensors(
+            members, device, self.dtype, beta_rel=s.beta_rel, pde_norm=s.pde_norm
+        )
         self.varpro = s.optimizer == "varpro"
         if self.varpro and s.engine == "autograd":
             raise ValueError("optimizer 'varpro' needs a Taylor engine")
@@ -159,8 +183,10 @@ class _Trainer:
         if self.varpro:
             groups = [{"params": self.hidden}]
         else:
-            groups = [{"params": self.hidden + head_params},
-                      {"params": [self.model.log_ei], "lr_factor": s.lr_ei_factor}]
+            groups = [
+                {"params": self.hidden + head_params},
+                {"params": [self.model.log_ei], "lr_factor": s.lr_ei_factor},
+            ]
         self.adam = torch.optim.Adam(groups, lr=s.lr)
         self.lbfgs: torch.optim.LBFGS | None = None
         self.col: Collocation | None = None
@@ -173,7 +199,9 @@ class _Trainer:
         s = self.s
         if self.compiled and engine == "taylor":
             engine = "taylor-unfused"  # inductor fuses the plain formulas better than the custom Function
-        self.objective = Objective(s.weighting, s.w_pde, s.w_ic, s.w_bc, s.w_data, engine=engine, images=s.images)
+        self.objective = Objective(
+            s.weighting, s.w_pde, s.w_ic, s.w_bc, s.w_data, engine=engine, images=s.images
+        )
         fn = self._basis if self.varpro else self._eval
         if self.compiled:
             try:
@@ -189,7 +217,9 @@ class _Trainer:
         except Exception as exc:
             if not self.compiled:
                 raise
-            log.warning("torch.compile failed (%s: %s); falling back to eager", exc.__class__.__name__, exc)
+            log.warning(
+                "torch.compile failed (%s: %s); falling back to eager", exc.__class__.__name__, exc
+            )
             self.compiled = False
             self._set_engine(self.s.engine)
             return self._fn(col)
@@ -199,8 +229,14 @@ class _Trainer:
         """Fresh collocation points from the members' generators (``factor`` times the usual counts)."""
         s, pt = self.s, self.pt
         col = sample_collocation(
-            self.col_gens, factor * s.n_pde, factor * s.n_bc, factor * s.n_ic, load_fraction=s.load_fraction,
-            speed=pt.speed, delays=pt.delays, beta=float(pt.beta),
+            self.col_gens,
+            factor * s.n_pde,
+            factor * s.n_bc,
+            factor * s.n_ic,
+            load_fraction=s.load_fraction,
+            speed=pt.speed,
+            delays=pt.delays,
+            beta=float(pt.beta),
         )
         return col.to(self.device, self.dtype)
 
@@ -223,13 +259,27 @@ class _Trainer:
         if solve:
             posterior = pt.data_scale is not None
             prev = self.prev_terms if self.s.weighting == "adaptive" else None
-            weights = self.objective.weights(prev, posterior) if prev is not None else (
-                self.objective.weights({k: torch.ones(self.M, device=self.device) for k in TERMS}, posterior)
-                if self.s.weighting == "adaptive" else self.objective.weights({}, posterior))
+            weights = (
+                self.objective.weights(prev, posterior)
+                if prev is not None
+                else (
+                    self.objective.weights(
+                        {k: torch.ones(self.M, device=self.device) for k in TERMS}, posterior
+                    )
+                    if self.s.weighting == "adaptive"
+                    else self.objective.weights({}, posterior)
+                )
+            )
             vary = model.free_vibration if exact_frequency else None
             system = head_system(basis, pt, col, weights, self.objective.images, vary=vary)
-            c, sol = solve_head(system, model.log_ei.detach(), half_width=VARPRO_HALF_WIDTH,
-                                s_max=self.s.max_log_ei, data_scale=pt.data_scale, anchor=pt.anchor)
+            c, sol = solve_head(
+                system,
+                model.log_ei.detach(),
+                half_width=VARPRO_HALF_WIDTH,
+                s_max=self.s.max_log_ei,
+                data_scale=pt.data_scale,
+                anchor=pt.anchor,
+            )
             model.set_head(c.to(self.dtype))
             with torch.no_grad():
                 model.log_ei.copy_(sol.to(self.dtype))
@@ -299,8 +349,14 @@ class _Trainer:
 
     def _make_lbfgs(self) -> torch.optim.LBFGS:
         params = self.hidden if self.varpro else list(self.model.parameters())
-        return torch.optim.LBFGS(params, lr=1.0, history_size=50, tolerance_grad=0.0, tolerance_change=0.0,
-                                 line_search_fn="strong_wolfe")
+        return torch.optim.LBFGS(
+            params,
+            lr=1.0,
+            history_size=50,
+            tolerance_grad=0.0,
+            tolerance_change=0.0,
+            line_search_fn="strong_wolfe",
+        )
 
     def lbfgs_chunk(self, n: int) -> None:
         self.set_beta(1.0)
@@ -326,7 +382,9 @@ class _Trainer:
             return torch.tensor(abs(f0) * 1e6 + 1e6, dtype=total.dtype, device=total.device)
 
         self.lbfgs.step(closure)
-        total, per, terms = self.loss(self.col)  # (with grad: no_grad would make torch.compile recompile)
+        total, per, terms = self.loss(
+            self.col
+        )  # (with grad: no_grad would make torch.compile recompile)
         self.guard(total.detach(), "L-BFGS")
         self.step += n
         self.record(0.0, per, terms)
@@ -348,13 +406,19 @@ class _Trainer:
         }
 
     def load_state_dict(self, st: dict) -> None:
-        if st.get("schema") != CHECKPOINT_SCHEMA or st["settings"] != self.s.to_dict() or st["members"] != self.M:
+        if (
+            st.get("schema") != CHECKPOINT_SCHEMA
+            or st["settings"] != self.s.to_dict()
+            or st["members"] != self.M
+        ):
             raise ValueError("checkpoint was written by a fit with different settings or members")
         self.model.load_state_dict(st["model"])
         self.adam.load_state_dict(st["adam"])
         for g, state in zip(self.col_gens, st["col_gens"], strict=True):
             g.set_state(state)
-        self.col = None if st["col"] is None else Collocation(*st["col"]).to(self.device, self.dtype)
+        self.col = (
+            None if st["col"] is None else Collocation(*st["col"]).to(self.device, self.dtype)
+        )
         self.step, self.history, self.elapsed = st["step"], st["history"], st["elapsed"]
         if st["lbfgs"] is not None:
             self.lbfgs = self._make_lbfgs()
@@ -438,15 +502,25 @@ def fit(
 
     from tqdm.auto import tqdm
 
-    bar = tqdm(total=n_total, initial=min(tr.step, n_total), disable=quiet, desc="PINN", unit="step",
-               leave=False, dynamic_ncols=True)
+    bar = tqdm(
+        total=n_total,
+        initial=min(tr.step, n_total),
+        disable=quiet,
+        desc="PINN",
+        unit="step",
+        leave=False,
+        dynamic_ncols=True,
+    )
     try:
         while tr.step < s.epochs:
             tr.adam_step()
             bar.update(1)
             if tr.step % s.log_every == 0 or tr.step == s.epochs:
-                bar.set_postfix(EI=f"{np.median(tr.EI_raw()):.4g}", loss=f"{tr.history['total'][-1].sum():.3g}",
-                                refresh=False)
+                bar.set_postfix(
+                    EI=f"{np.median(tr.EI_raw()):.4g}",
+                    loss=f"{tr.history['total'][-1].sum():.3g}",
+                    refresh=False,
+                )
             if path is not None and tr.step % s.checkpoint_every == 0:
                 save_now()
             if callback is not None:
@@ -477,15 +551,23 @@ def fit(
     EI_raw = tr.EI_raw()
     factor = 1.0
     if s.correct_beta:
-        factor = beta_bias_factor(problem.beam, problem.vehicle, problem.datasets[0], tr.beta,
-                                  EI=float(np.median(EI_raw)))
+        factor = beta_bias_factor(
+            problem.beam, problem.vehicle, problem.datasets[0], tr.beta, EI=float(np.median(EI_raw))
+        )
     EI = EI_raw / factor
     hist = {k: np.asarray(v) for k, v in tr.history.items()}
     runtime = elapsed0 + time.perf_counter() - t0
     single = members is None
-    squeeze = (lambda a: float(np.asarray(a).reshape(-1)[0])) if single else (lambda a: np.asarray(a))  # noqa: E731
-    log.info("PINN fit: EI = %s N m^2 (raw %s, beta factor %.6f) in %.1f s", np.round(EI, 0), np.round(EI_raw, 0),
-             factor, runtime)
+    squeeze = (
+        (lambda a: float(np.asarray(a).reshape(-1)[0])) if single else (lambda a: np.asarray(a))
+    )  # noqa: E731
+    log.info(
+        "PINN fit: EI = %s N m^2 (raw %s, beta factor %.6f) in %.1f s",
+        np.round(EI, 0),
+        np.round(EI_raw, 0),
+        factor,
+        runtime,
+    )
     return FitResult(
         EI=squeeze(EI),
         EI_raw=squeeze(EI_raw),

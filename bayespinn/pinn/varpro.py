@@ -116,7 +116,9 @@ class HeadSystem:
         g = e[..., 0] * self.q1 + self.q2
         if self.vary is not None:
             G_fv, G_vv, g_v = self.vary.blocks(s)
-            G = torch.cat([torch.cat([G, G_fv], -1), torch.cat([G_fv.transpose(1, 2), G_vv], -1)], -2)
+            G = torch.cat(
+                [torch.cat([G, G_fv], -1), torch.cat([G_fv.transpose(1, 2), G_vv], -1)], -2
+            )
             g = torch.cat([g, g_v], -1)
         diag = G.diagonal(dim1=-2, dim2=-1)
         lam = RIDGE * diag.mean(-1).clamp_min(1e-300)
@@ -216,7 +218,15 @@ def head_system(
             D = lambda a: a.to(dd) if torch.is_tensor(a) else a  # noqa: E731
             pde = None
             if not vary.pde_exact:
-                pde = (D(col.pde[0]), D(col.pde[1]), D(rf * k * pt.stiffness), D(rf * k * pt.inertia), A1, A2, bf)
+                pde = (
+                    D(col.pde[0]),
+                    D(col.pde[1]),
+                    D(rf * k * pt.stiffness),
+                    D(rf * k * pt.inertia),
+                    A1,
+                    A2,
+                    bf,
+                )
             ic = (D(col.ic[0]), D(col.ic[1]), ri, D(ji.value * ri), D(ji.dt(1) * ri))
             data = (D(pt.xi), D(pt.tau), data_order(pt), a_u, a_xx, rd, Ad, bd)
             vc = VaryingColumns(vary, pde, ic, data)

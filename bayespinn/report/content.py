@@ -299,8 +299,16 @@ def comparison_section(summary: dict) -> list[Block]:
 
 
 #: diagnostics with a column of their own
-_DIAG_COLUMNS = ("rhat", "ess_bulk", "ess_tail", "converged", "divergences", "tree_depth_saturated",
-                 "tree_depth_saturated_fraction", "max_tree_depth")
+_DIAG_COLUMNS = (
+    "rhat",
+    "ess_bulk",
+    "ess_tail",
+    "converged",
+    "divergences",
+    "tree_depth_saturated",
+    "tree_depth_saturated_fraction",
+    "max_tree_depth",
+)
 
 
 def _other_diag(d: dict) -> str:
@@ -325,8 +333,11 @@ def diagnostics_section(summary: dict) -> list[Block]:
                 fmt(d.get("ess_bulk"), ".0f"),
                 fmt(d.get("ess_tail"), ".0f"),
                 str(d["divergences"]) if "divergences" in d else "n/a",
-                (f"{d['tree_depth_saturated']} (max depth {d.get('max_tree_depth')})"
-                 if "tree_depth_saturated" in d else "n/a"),
+                (
+                    f"{d['tree_depth_saturated']} (max depth {d.get('max_tree_depth')})"
+                    if "tree_depth_saturated" in d
+                    else "n/a"
+                ),
                 str(d.get("converged", "n/a")),
                 _other_diag(d),
             )
@@ -334,8 +345,16 @@ def diagnostics_section(summary: dict) -> list[Block]:
     out: list[Block] = [
         Heading("Diagnostics"),
         table(
-            ("method", "R-hat", "bulk ESS", "tail ESS", "divergences", "trajectories cut at max tree depth",
-             "converged", "other"),
+            (
+                "method",
+                "R-hat",
+                "bulk ESS",
+                "tail ESS",
+                "divergences",
+                "trajectories cut at max tree depth",
+                "converged",
+                "other",
+            ),
             rows,
             "R-hat and ESS from ArviZ (rank-normalised split R-hat); divergences and tree depths from NUTS; "
             "converged: R-hat <= 1.01, bulk and tail ESS >= 400, and (NUTS) no divergence and no trajectory "

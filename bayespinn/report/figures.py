@@ -53,8 +53,12 @@ def _color(key: str) -> str:
 
 def _band(ax, s, mean, lo, hi, f: float, key: str, lw: float, mean_label: bool = True) -> None:
     """A method's 90 % band and mean along s, in display units (times f), in its colour."""
-    ax.fill_between(s, lo * f, hi * f, color=_color(key), alpha=0.25, lw=0, label=f"{name(key)} 90 % band")
-    ax.plot(s, mean * f, color=_color(key), lw=lw, label=f"{name(key)} mean" if mean_label else None)
+    ax.fill_between(
+        s, lo * f, hi * f, color=_color(key), alpha=0.25, lw=0, label=f"{name(key)} 90 % band"
+    )
+    ax.plot(
+        s, mean * f, color=_color(key), lw=lw, label=f"{name(key)} mean" if mean_label else None
+    )
 
 
 def _new_figure(w: float, h: float):

@@ -102,7 +102,9 @@ class _Potential:
 
 def _map(pot: _Potential, z0: np.ndarray) -> np.ndarray:
     z = torch.tensor(z0, dtype=torch.float64, requires_grad=True)
-    opt = torch.optim.LBFGS([z], lr=1.0, max_iter=200, line_search_fn="strong_wolfe", tolerance_grad=1e-10)
+    opt = torch.optim.LBFGS(
+        [z], lr=1.0, max_iter=200, line_search_fn="strong_wolfe", tolerance_grad=1e-10
+    )
 
     def closure():
         opt.zero_grad()
@@ -122,7 +124,9 @@ def _laplace_factor(pot: _Potential, z: np.ndarray) -> np.ndarray:
     try:
         return np.linalg.cholesky(np.linalg.inv(0.5 * (H + H.T)))
     except np.linalg.LinAlgError:
-        log.warning("[bpinn] the posterior's Hessian at the MAP is not positive definite; NUTS starts unscaled")
+        log.warning(
+            "[bpinn] the posterior's Hessian at the MAP is not positive definite; NUTS starts unscaled"
+        )
         return np.diag([0.1, 0.1])
 
 
@@ -134,7 +138,9 @@ class _Whitened:
     depth until its mass-matrix windows catch up (measured: 2.7 s per iteration at the clean level); in u it
     is about a unit Gaussian from the first step."""
 
-    def __init__(self, pot: _Potential, z_map: np.ndarray, L: np.ndarray, device: str | torch.device = "cpu"):
+    def __init__(
+        self, pot: _Potential, z_map: np.ndarray, L: np.ndarray, device: str | torch.device = "cpu"
+    ):
         self.pot = pot
         self.z_map = torch.tensor(z_map, dtype=torch.float64, device=device)
         self.L = torch.tensor(L, dtype=torch.float64, device=device)
@@ -166,8 +172,10 @@ def valid_start(pot, direction: torch.Tensor, key: str = "u", **fixed) -> torch.
             ok = False
         if ok:
             return u
-    raise RuntimeError("the B-PINN posterior cannot be evaluated even at its MAP: the last-layer model is "
-                       "degenerate for these data")
+    raise RuntimeError(
+        "the B-PINN posterior cannot be evaluated even at its MAP: the last-layer model is "
+        "degenerate for these data"
+    )
 
 
 def nuts(pot: _Potential, z_map: np.ndarray, L: np.ndarray, s: NUTSSettings, seed, progress: bool):
@@ -178,9 +186,19 @@ def nuts(pot: _Potential, z_map: np.ndarray, L: np.ndarray, s: NUTSSettings, see
     out, runs = [], []
     for c in range(s.chains):
         cs = seeding.child(seed, "pyro", c)
-        u0 = valid_start(wpot, torch.tensor(np.random.default_rng(cs).standard_normal(2), dtype=torch.float64))
-        run = run_nuts(wpot, {"u": u0}, warmup=s.warmup, samples=s.samples, seed=cs, full_mass=True,
-                       max_tree_depth=s.max_tree_depth, progress=progress)
+        u0 = valid_start(
+            wpot, torch.tensor(np.random.default_rng(cs).standard_normal(2), dtype=torch.float64)
+        )
+        run = run_nuts(
+            wpot,
+            {"u": u0},
+            warmup=s.warmup,
+            samples=s.samples,
+            seed=cs,
+            full_mass=True,
+            max_tree_depth=s.max_tree_depth,
+            progress=progress,
+        )
         out.append(wpot.z_draws(run.samples["u"]))
         runs.append(run)
     return np.stack(out), runs
@@ -206,7 +224,13 @@ def bpinn_posterior(
     settings = TrainSettings.for_profile(opts.profile)
     problem = Problem.from_config(cfg, data)
     log.info("[bpinn] deterministic warm-start fit (%s profile)", opts.profile)
-    res = fit(problem, settings, seed=seeding.stream(seed, "init"), device=opts.device, quiet=not opts.progress)
+    res = fit(
+        problem,
+        settings,
+        seed=seeding.stream(seed, "init"),
+        device=opts.device,
+        quiet=not opts.progress,
+    )
     return _sample(res, problem, data, cfg, seed, opts, noise, settings, t0)
 
 
@@ -219,12 +243,16 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
         from .bpinn_full import FULL_VARIANT, sample_full
 
         with torch_threads(1):  # the last-layer MAP it starts from: tiny linear algebra
-            start = last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=False)
+            start = last_layer_map(
+                res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=False
+            )
         draws, diag, pred = sample_full(start, seed, opts, shift)
         name = FULL_VARIANT
     else:
         with torch_threads(1):  # tiny linear algebra (see `threads`)
-            draws, diag, pred = _sample_last_layer(res, problem, data, seed, opts, noise, settings, ei_prior, shift)
+            draws, diag, pred = _sample_last_layer(
+                res, problem, data, seed, opts, noise, settings, ei_prior, shift
+            )
         name = VARIANT
     log_ei = draws[:, :, 0] + shift
     EI, sigma = np.exp(log_ei), np.exp(draws[:, :, 1])
@@ -236,7 +264,12 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
         diag["problems"] = trouble
     ident = identified(log_ei.ravel(), ei_prior)
-    diag.update(converged=converged, fit_EI=float(res.EI), fit_runtime_s=res.runtime_s, beta_factor=res.beta_factor)
+    diag.update(
+        converged=converged,
+        fit_EI=float(res.EI),
+        fit_runtime_s=res.runtime_s,
+        beta_factor=res.beta_factor,
+    )
     info = {"variant": name, "identified": ident}
     if not ident:
         info["note"] = "EI is not identified by these data"
@@ -245,22 +278,44 @@ def _sample(res, problem, data, cfg, seed, opts, noise, settings, t0) -> Posteri
         moved = abs(float(log_ei.mean()) - math.log(res.EI)) / max(float(log_ei.std()), 1e-12)
         diag["moved_from_fit_sd"] = moved
         if moved > MAX_MOVE_SD:
-            msg = (f"the last-layer posterior (EI mean {float(EI.mean()):.4g} N m^2) lies {moved:.1f} posterior sd "
-                   f"from the PINN fit it is built on ({float(res.EI):.4g} N m^2): the network has not learnt the "
-                   "physics well enough for this approximation, so this interval is not trustworthy")
+            msg = (
+                f"the last-layer posterior (EI mean {float(EI.mean()):.4g} N m^2) lies {moved:.1f} posterior sd "
+                f"from the PINN fit it is built on ({float(res.EI):.4g} N m^2): the network has not learnt the "
+                "physics well enough for this approximation, so this interval is not trustworthy"
+            )
             warnings.warn("B-PINN: " + msg, RuntimeWarning, stacklevel=2)
             info["warnings"] = [msg]
-    return Posterior("bpinn", EI, sigma, diagnostics=diag, info=info, runtime_s=time.perf_counter() - t0,
-                     predictor=pred)
+    return Posterior(
+        "bpinn",
+        EI,
+        sigma,
+        diagnostics=diag,
+        info=info,
+        runtime_s=time.perf_counter() - t0,
+        predictor=pred,
+    )
 
 
-def last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=None):
+def last_layer_map(
+    res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=None
+):
     """The fit's last-layer model, its potential in (log theta, log sigma), the MAP there and the Laplace
     factor: (model, LastLayer, potential, z_map, L)."""
     model = res.model("cpu")
     rng = np.random.default_rng(seeding.stream(seed, "collocation"))
-    ll = LastLayer(model, 0, problem, data, rng, n_pde=settings.n_pde, n_bc=settings.n_bc, n_ic=settings.n_ic,
-                   beta_rel=settings.beta_rel, images=settings.images, vary_first_mode=vary_first_mode)
+    ll = LastLayer(
+        model,
+        0,
+        problem,
+        data,
+        rng,
+        n_pde=settings.n_pde,
+        n_bc=settings.n_bc,
+        n_ic=settings.n_ic,
+        beta_rel=settings.beta_rel,
+        images=settings.images,
+        vary_first_mode=vary_first_mode,
+    )
     pot = _Potential(ll, ei_prior, noise, shift)
     sigma0 = max(math.sqrt(ll.fit_rss / max(ll.n, 1)), noise.low * 10)
     z_map = _map(pot, np.array([math.log(ll.theta_fit), math.log(sigma0)]))
@@ -269,14 +324,24 @@ def last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift, v
 
 def _sample_last_layer(res, problem, data, seed, opts, noise, settings, ei_prior, shift):
     """NUTS on (log theta, log sigma) of the last-layer model: z draws (chain, draw, 2), diagnostics, predictor."""
-    _, ll, pot, z_map, L = last_layer_map(res, problem, data, seed, noise, settings, ei_prior, shift)
+    _, ll, pot, z_map, L = last_layer_map(
+        res, problem, data, seed, noise, settings, ei_prior, shift
+    )
     log.info("[bpinn] NUTS: %s", VARIANT)
     s = NUTSSettings.for_profile(opts.profile)
     draws, runs = nuts(pot, z_map, L, s, seed, opts.progress)
-    diag = {"chains": s.chains, "warmup": s.warmup, "samples": s.samples, **nuts_health(runs),
-            "pseudo_sd": {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i},
-            "first_mode": {"follows_EI": ll.first_mode_varies, "vibration_z2": ll.vibration_z2,
-                           "threshold": ll.vibration_threshold}}
+    diag = {
+        "chains": s.chains,
+        "warmup": s.warmup,
+        "samples": s.samples,
+        **nuts_health(runs),
+        "pseudo_sd": {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i},
+        "first_mode": {
+            "follows_EI": ll.first_mode_varies,
+            "vibration_z2": ll.vibration_z2,
+            "threshold": ll.vibration_threshold,
+        },
+    }
     pred = LastLayerPredictor(ll, draws[:, :, 0].ravel(), draws[:, :, 1].ravel(), shift)
     return draws, diag, pred
 
@@ -291,7 +356,9 @@ class LastLayerPredictor:
     def __init__(self, ll: LastLayer, log_theta: np.ndarray, log_sigma: np.ndarray, shift: float):
         self.ll, self.lt, self.ls, self.shift = ll, log_theta, log_sigma, shift
 
-    def __call__(self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None) -> np.ndarray:
+    def __call__(
+        self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
+    ) -> np.ndarray:
         rng = rng or np.random.default_rng(0)
         idx = rng.choice(self.lt.size, size=min(n_draws, self.lt.size), replace=False)
         if quantity == "deflection":

@@ -58,8 +58,10 @@ from .nuts import nuts_health, run_nuts
 
 log = logging.getLogger(__name__)
 
-FULL_VARIANT = ("full-weight B-PINN (NUTS on every hidden weight, log EI and log sigma; output weights "
-                "marginalised analytically)")
+FULL_VARIANT = (
+    "full-weight B-PINN (NUTS on every hidden weight, log EI and log sigma; output weights "
+    "marginalised analytically)"
+)
 #: prior sd of every hidden weight and bias (B-PINNs: standard normal)
 HIDDEN_PRIOR_SD = 1.0
 #: hidden-weight draws kept for the posterior predictive (evenly spaced over all chains)
@@ -98,7 +100,9 @@ class FullWeight:
 
     def __init__(self, ll: LastLayer, net: PINN, device: str | torch.device = "cpu"):
         if ll.fv is not None:
-            raise ValueError("the full-weight model needs a last-layer model whose first mode is held")
+            raise ValueError(
+                "the full-weight model needs a last-layer model whose first mode is held"
+            )
         self.device = torch.device(device)
         self.ll = _moved(ll, self.device)
         net = net.double().to(self.device)
@@ -137,7 +141,9 @@ class FullWeight:
         """The last-layer model with the design rows of the network at hidden weights h."""
         return self.ll.with_rows(*self.ll.rows(self.jet(h)))
 
-    def log_marginal(self, h: torch.Tensor, log_theta: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
+    def log_marginal(
+        self, h: torch.Tensor, log_theta: torch.Tensor, log_sigma: torch.Tensor
+    ) -> torch.Tensor:
         return self.model_at(h).log_marginal(log_theta, log_sigma)
 
 
@@ -161,8 +167,15 @@ class _FullPotential:
     s_h = `HIDDEN_PRIOR_SD`; the tests also use a prior held tightly at the fit, under which this posterior
     must reduce to the last-layer one."""
 
-    def __init__(self, fw: FullWeight, z_pot, z_map: np.ndarray, L: np.ndarray,
-                 prior_mean: torch.Tensor | None = None, prior_sd: float = HIDDEN_PRIOR_SD):
+    def __init__(
+        self,
+        fw: FullWeight,
+        z_pot,
+        z_map: np.ndarray,
+        L: np.ndarray,
+        prior_mean: torch.Tensor | None = None,
+        prior_sd: float = HIDDEN_PRIOR_SD,
+    ):
         self.fw, self.z_pot = fw, z_pot
         self.zw = _Whitened(z_pot, z_map, L, fw.device)
         self.m = torch.zeros_like(fw.h_fit) if prior_mean is None else prior_mean.to(fw.h_fit)
@@ -177,7 +190,11 @@ class _FullPotential:
     def __call__(self, params: dict) -> torch.Tensor:
         v, z = params["v"], self.zw.z(params["u"])
         lt, ls = z[0], z[1]
-        return -(self.fw.log_marginal(self.h(v), lt, ls) - 0.5 * (v * v).sum() + self.z_pot.log_prior(lt, ls))
+        return -(
+            self.fw.log_marginal(self.h(v), lt, ls)
+            - 0.5 * (v * v).sum()
+            + self.z_pot.log_prior(lt, ls)
+        )
 
 
 def full_nuts(pot: _FullPotential, s: FullHMCSettings, seed, progress: bool):
@@ -190,10 +207,20 @@ def full_nuts(pot: _FullPotential, s: FullHMCSettings, seed, progress: bool):
     keep = max(1, math.ceil(PREDICTIVE_DRAWS / s.chains))
     for c in range(s.chains):
         cs = seeding.child(seed, "pyro-full", c)
-        d = torch.tensor(np.random.default_rng(cs).standard_normal(2), dtype=torch.float64, device=dev)
+        d = torch.tensor(
+            np.random.default_rng(cs).standard_normal(2), dtype=torch.float64, device=dev
+        )
         u0 = valid_start(pot, d, v=pot.v_fit())
-        run = run_nuts(pot, {"v": pot.v_fit(), "u": u0}, warmup=s.warmup, samples=s.samples, seed=cs,
-                       full_mass=False, max_tree_depth=s.max_tree_depth, progress=progress)
+        run = run_nuts(
+            pot,
+            {"v": pot.v_fit(), "u": u0},
+            warmup=s.warmup,
+            samples=s.samples,
+            seed=cs,
+            full_mass=False,
+            max_tree_depth=s.max_tree_depth,
+            progress=progress,
+        )
         smp = run.samples
         z = pot.zw.z_draws(smp["u"])
         zs.append(z)
@@ -213,18 +240,40 @@ def sample_full(start, seed, opts, shift):
     s = FullHMCSettings.for_profile(opts.profile)
     # one gradient's cost, so the log says what the chains will take
     tg = time.perf_counter()
-    probe = {"v": pot.v_fit().requires_grad_(True), "u": torch.zeros(2, dtype=torch.float64, device=fw.device)}
+    probe = {
+        "v": pot.v_fit().requires_grad_(True),
+        "u": torch.zeros(2, dtype=torch.float64, device=fw.device),
+    }
     pot(probe).backward()
     g = time.perf_counter() - tg
     n_iter = s.chains * (s.warmup + s.samples)
-    log.info("[bpinn] NUTS: %s; %d hidden weights; one gradient %.3g s, so %d iterations take between %.3g s "
-             "and %.3g s (max tree depth %d)", FULL_VARIANT, fw.dim, g, n_iter, n_iter * g,
-             n_iter * g * (2**s.max_tree_depth - 1), s.max_tree_depth)
+    log.info(
+        "[bpinn] NUTS: %s; %d hidden weights; one gradient %.3g s, so %d iterations take between %.3g s "
+        "and %.3g s (max tree depth %d)",
+        FULL_VARIANT,
+        fw.dim,
+        g,
+        n_iter,
+        n_iter * g,
+        n_iter * g * (2**s.max_tree_depth - 1),
+        s.max_tree_depth,
+    )
     draws, h_draws, hz, runs = full_nuts(pot, s, seed, opts.progress)
-    diag = {"chains": s.chains, "warmup": s.warmup, "samples": s.samples, **nuts_health(runs),
-            "hidden_weights": fw.dim, "hidden_prior_sd": HIDDEN_PRIOR_SD,
-            "gradient_s": g, "pseudo_sd": {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i},
-            "first_mode": {"follows_EI": False, "vibration_z2": ll.vibration_z2, "threshold": ll.vibration_threshold}}
+    diag = {
+        "chains": s.chains,
+        "warmup": s.warmup,
+        "samples": s.samples,
+        **nuts_health(runs),
+        "hidden_weights": fw.dim,
+        "hidden_prior_sd": HIDDEN_PRIOR_SD,
+        "gradient_s": g,
+        "pseudo_sd": {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i},
+        "first_mode": {
+            "follows_EI": False,
+            "vibration_z2": ll.vibration_z2,
+            "threshold": ll.vibration_threshold,
+        },
+    }
     pred = FullWeightPredictor(fw, h_draws, hz[:, 0], hz[:, 1], shift)
     return draws, diag, pred
 
@@ -233,8 +282,21 @@ class FullWeightPredictor:
     """Posterior predictive of the full-weight model: per kept draw (h, theta, sigma) the output weights drawn
     from their exact Gaussian conditional, then deflection, curvature or moment."""
 
-    def __init__(self, fw: FullWeight, h: torch.Tensor, log_theta: np.ndarray, log_sigma: np.ndarray, shift: float):
-        self.fw, self.h, self.lt, self.ls, self.shift = fw, h, np.asarray(log_theta), np.asarray(log_sigma), shift
+    def __init__(
+        self,
+        fw: FullWeight,
+        h: torch.Tensor,
+        log_theta: np.ndarray,
+        log_sigma: np.ndarray,
+        shift: float,
+    ):
+        self.fw, self.h, self.lt, self.ls, self.shift = (
+            fw,
+            h,
+            np.asarray(log_theta),
+            np.asarray(log_sigma),
+            shift,
+        )
         self._weights: dict[int, tuple[torch.Tensor, torch.Tensor]] = {}
 
     def _output_weights(self, i: int) -> tuple[torch.Tensor, torch.Tensor]:
@@ -248,7 +310,9 @@ class FullWeightPredictor:
             self._weights[i] = (mean, torch.linalg.cholesky(cov + 1e-30 * eye))
         return self._weights[i]
 
-    def __call__(self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None) -> np.ndarray:
+    def __call__(
+        self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
+    ) -> np.ndarray:
         if quantity not in ("deflection", "curvature", "moment"):
             raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
         rng = rng or np.random.default_rng(0)

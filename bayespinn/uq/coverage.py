@@ -73,7 +73,9 @@ def run_replicate(task: Replicate) -> dict:
     if task.truth == "prior":
         from .priors import EIPrior
 
-        ei = float(EIPrior.from_spec(cfg.prior).sample(np.random.default_rng(seeding.stream(seq, "init"))))
+        ei = float(
+            EIPrior.from_spec(cfg.prior).sample(np.random.default_rng(seeding.stream(seq, "init")))
+        )
         cfg = dataclasses.replace(cfg, beam=dataclasses.replace(cfg.beam, EI=ei))
     data = simulate(cfg, task.snr_db, seq)
     post = infer(task.method, data, cfg, seq, task.opts)
@@ -110,7 +112,9 @@ def binomial_acceptance(n: int, level: float, false_failure: float = 0.01) -> tu
 POWER_AGAINST = 0.8
 
 
-def power(n: int, level: float, against: float = POWER_AGAINST, false_failure: float = 0.01) -> float:
+def power(
+    n: int, level: float, against: float = POWER_AGAINST, false_failure: float = 0.01
+) -> float:
     """Probability that n replicates of a method whose intervals really cover `against` put its hits outside
     the acceptance region of `level` (the chance the study notices that miscalibration)."""
     lo, hi = binomial_acceptance(n, level, false_failure)
@@ -124,16 +128,27 @@ def verdict(hits: int, n: int, level: float, false_failure: float = 0.01) -> str
     return f"consistent with {pct}" if lo <= hits <= hi else f"not consistent with {pct}"
 
 
-def fingerprint(method: str, cfg: Config, snr_db, seed: int, level: float, truth: str, opts: RunOptions) -> str:
+def fingerprint(
+    method: str, cfg: Config, snr_db, seed: int, level: float, truth: str, opts: RunOptions
+) -> str:
     """What decides a replicate's result: method, configuration, noise level, seed, level, truth and the
     method's options (not the executor, the worker count or the number of replicates)."""
     from .posterior import jsonable
 
     spec = {
-        "method": method, "cfg": jsonable(dataclasses.asdict(cfg)), "snr_db": snr_db, "seed": seed, "level": level,
-        "truth": truth, "profile": opts.profile, "members": opts.members, "device": opts.device,
-        "noise_prior": opts.noise_prior, "mcmc": repr(opts.mcmc),
-        "bpinn_variant": opts.bpinn_variant, "seeding": SEEDING,
+        "method": method,
+        "cfg": jsonable(dataclasses.asdict(cfg)),
+        "snr_db": snr_db,
+        "seed": seed,
+        "level": level,
+        "truth": truth,
+        "profile": opts.profile,
+        "members": opts.members,
+        "device": opts.device,
+        "noise_prior": opts.noise_prior,
+        "mcmc": repr(opts.mcmc),
+        "bpinn_variant": opts.bpinn_variant,
+        "seeding": SEEDING,
     }
     return hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode()).hexdigest()[:16]
 
@@ -186,7 +201,9 @@ def earlier_records(path: str | Path, key: str) -> dict[int, dict]:
         log.warning("%s is not a study file; nothing reused from it", path)
         return {}
     if doc.get("fingerprint") != key:
-        log.info("%s is another study (or predates study fingerprints); nothing reused from it", path)
+        log.info(
+            "%s is another study (or predates study fingerprints); nothing reused from it", path
+        )
         return {}
     return {int(r["index"]): r for r in doc.get("records", [])}
 
@@ -220,8 +237,9 @@ def coverage_study(
     t0 = time.perf_counter()
     # the replicates are the parallel tasks: inside one, an ensemble's members train one after another in
     # that worker (same results as any other executor; no pool nested in a pool)
-    opts = dataclasses.replace(opts or RunOptions(), snr_db=snr_db, progress=False,
-                               executor=Executor("local", workers=1))
+    opts = dataclasses.replace(
+        opts or RunOptions(), snr_db=snr_db, progress=False, executor=Executor("local", workers=1)
+    )
     if method == "modal" and opts.mcmc is None:
         from .sampler import MCMCSettings
 
@@ -231,22 +249,37 @@ def coverage_study(
     ck = Checkpoint(checkpoint, key, earlier) if checkpoint else None
     have = ck.done if ck else earlier
     version = coverage_version(method)
-    other = sorted(i for i, r in have.items() if i < replicates and r.get("code_version") != version)
+    other = sorted(
+        i for i, r in have.items() if i < replicates and r.get("code_version") != version
+    )
     if other and not mix_versions:
         src = " and ".join(str(p) for p in (resume_from, checkpoint) if p is not None)
         raise InputError(
-            "--mix-versions", "off",
+            "--mix-versions",
+            "off",
             f"resumed replicates of today's code ({version}): {len(other)} of the {len(have)} in {src} were "
             "computed by other code; pass --mix-versions to keep them (the study records it), or remove them "
             "to start afresh",
         )
     if other:
-        log.warning("mixing code versions: %d resumed replicates were computed by other code than %s",
-                    len(other), version)
-    tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in range(replicates) if i not in have]
-    new = (executor or Executor()).map(run_replicate, tasks, desc=f"coverage {method}", progress=progress,
-                                       resources=task_resources(opts.device if method != "modal" else "cpu"),
-                                       on_result=(lambda i, r: ck.add(r)) if ck else None)
+        log.warning(
+            "mixing code versions: %d resumed replicates were computed by other code than %s",
+            len(other),
+            version,
+        )
+    tasks = [
+        Replicate(i, method, cfg, snr_db, seed, level, truth, opts)
+        for i in range(replicates)
+        if i not in have
+    ]
+    new = (executor or Executor()).map(
+        run_replicate,
+        tasks,
+        desc=f"coverage {method}",
+        progress=progress,
+        resources=task_resources(opts.device if method != "modal" else "cpu"),
+        on_result=(lambda i, r: ck.add(r)) if ck else None,
+    )
     recs = sorted([have[i] for i in range(replicates) if i in have] + new, key=lambda r: r["index"])
     versions = Counter(str(r.get("code_version")) for r in recs)
     hits = int(sum(r["hit"] for r in recs))
@@ -296,7 +329,9 @@ def paired_with_reference(study: dict, reference: dict) -> dict | None:
     dataset was extreme, not that the method failed). Returns None when the studies do not share
     datasets.
     """
-    same = all(study.get(k) == reference.get(k) for k in ("seed", "snr_db", "case", "truth", "seeding"))
+    same = all(
+        study.get(k) == reference.get(k) for k in ("seed", "snr_db", "case", "truth", "seeding")
+    )
     if not same or study.get("truth") != "fixed":
         return None
     ref = {r["index"]: r for r in reference["records"]}

@@ -94,17 +94,24 @@ def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
     grid = center + np.linspace(-SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_POINTS)
     lt = torch.tensor(math.log(ll.theta_fit), dtype=torch.float64)
     with torch.no_grad(), torch_threads(1):
-        lp = np.array([float(ll.log_marginal(lt, torch.tensor(g, dtype=torch.float64))) for g in grid])
+        lp = np.array(
+            [float(ll.log_marginal(lt, torch.tensor(g, dtype=torch.float64))) for g in grid]
+        )
     if noise.kind == "snr":
         lp = lp - 0.5 * ((grid - math.log(noise.center)) / noise.log_sd) ** 2
     if int(np.argmax(lp)) in (0, grid.size - 1):
-        log.warning("[ensemble] the noise level's posterior reaches the edge of its grid (%.3g .. %.3g)",
-                    math.exp(grid[0]), math.exp(grid[-1]))
+        log.warning(
+            "[ensemble] the noise level's posterior reaches the edge of its grid (%.3g .. %.3g)",
+            math.exp(grid[0]),
+            math.exp(grid[-1]),
+        )
     p = np.exp(lp - lp.max())
     return SigmaGrid(grid, p / p.sum())
 
 
-def pool_log_ei(log_ei_m: np.ndarray, lap_sd: np.ndarray, prior_log_sd: float) -> tuple[float, float, float, float]:
+def pool_log_ei(
+    log_ei_m: np.ndarray, lap_sd: np.ndarray, prior_log_sd: float
+) -> tuple[float, float, float, float]:
     """(between-member variance, mean Laplace variance, its dof, pooled variance) of log EI.
 
     pooled = (nu lap_var + (M - 1) between) / (nu + M - 1), nu = `LAPLACE_DOF` x the share of members
@@ -123,8 +130,12 @@ def pool_log_ei(log_ei_m: np.ndarray, lap_sd: np.ndarray, prior_log_sd: float) -
     return between, lap_var, nu, pooled
 
 
-def _rto_data(data: Measurements, sigma: float, M: int, rng: np.random.Generator) -> tuple[Measurements, ...]:
-    return tuple(data.with_values(data.value + sigma * rng.standard_normal(len(data))) for _ in range(M))
+def _rto_data(
+    data: Measurements, sigma: float, M: int, rng: np.random.Generator
+) -> tuple[Measurements, ...]:
+    return tuple(
+        data.with_values(data.value + sigma * rng.standard_normal(len(data))) for _ in range(M)
+    )
 
 
 @dataclass(frozen=True)
@@ -161,8 +172,18 @@ class MemberTask:
 
 def _last_layer(model, m: int, base, data: Measurements, seed, settings) -> LastLayer:
     rng = np.random.default_rng(seeding.child(seed, "collocation", m))
-    return LastLayer(model, 0 if model.members == 1 else m, base, data, rng, n_pde=settings.n_pde,
-                     n_bc=settings.n_bc, n_ic=settings.n_ic, beta_rel=settings.beta_rel, images=settings.images)
+    return LastLayer(
+        model,
+        0 if model.members == 1 else m,
+        base,
+        data,
+        rng,
+        n_pde=settings.n_pde,
+        n_bc=settings.n_bc,
+        n_ic=settings.n_ic,
+        beta_rel=settings.beta_rel,
+        images=settings.images,
+    )
 
 
 def train_member(task: MemberTask) -> dict:
@@ -173,22 +194,44 @@ def train_member(task: MemberTask) -> dict:
     t = task
     s = t.settings
     with torch_threads(1):
-        problem = Problem.from_config(t.cfg, t.train_data, noise_sd=t.noise_sd,
-                                      anchor=None if t.anchor is None else ([t.anchor[0]], t.anchor[1]))
+        problem = Problem.from_config(
+            t.cfg,
+            t.train_data,
+            noise_sd=t.noise_sd,
+            anchor=None if t.anchor is None else ([t.anchor[0]], t.anchor[1]),
+        )
         every = max(1, (s.epochs + s.lbfgs_iters) // 5)
 
         def report(step, info):
             if t.progress and step % every == 0:
-                log.info("[ensemble] phase %d, member %d: step %d, EI %.5g N m^2", t.phase, t.m, step,
-                         float(info["EI_raw"][0]))
+                log.info(
+                    "[ensemble] phase %d, member %d: step %d, EI %.5g N m^2",
+                    t.phase,
+                    t.m,
+                    step,
+                    float(info["EI_raw"][0]),
+                )
 
         stream = "init" if t.phase == 1 else "collocation"
-        r = fit(problem, s, seed=seeding.stream(t.seed, stream), members=1, first_member=t.m, device="cpu",
-                quiet=True, init_state=t.init_state, callback=report)
+        r = fit(
+            problem,
+            s,
+            seed=seeding.stream(t.seed, stream),
+            members=1,
+            first_member=t.m,
+            device="cpu",
+            quiet=True,
+            init_state=t.init_state,
+            callback=report,
+        )
         base = Problem.from_config(t.cfg, t.data)
         ll = _last_layer(r.model("cpu"), t.m, base, t.data, t.seed, s)
-        out = {"EI": float(r.EI[0]), "beta_factor": float(r.beta_factor), "grid": sigma_grid(ll, t.noise),
-               "runtime_s": float(r.runtime_s)}
+        out = {
+            "EI": float(r.EI[0]),
+            "beta_factor": float(r.beta_factor),
+            "grid": sigma_grid(ll, t.noise),
+            "runtime_s": float(r.runtime_s),
+        }
         if t.phase == 1:
             out["state"] = r.state
         else:
@@ -212,12 +255,31 @@ def _phase_tasks(tasks: list[MemberTask], executor, desc: str, progress: bool) -
     )
 
 
-def _phase_batched(problem, settings, seed, stream: str, M: int, device, quiet: bool, init_state, base, data,
-                   noise: NoisePrior, keep_last_layers: bool) -> _Phase:
+def _phase_batched(
+    problem,
+    settings,
+    seed,
+    stream: str,
+    M: int,
+    device,
+    quiet: bool,
+    init_state,
+    base,
+    data,
+    noise: NoisePrior,
+    keep_last_layers: bool,
+) -> _Phase:
     from ..pinn import fit
 
-    r = fit(problem, settings, seed=seeding.stream(seed, stream), members=M, device=device, quiet=quiet,
-            init_state=init_state)
+    r = fit(
+        problem,
+        settings,
+        seed=seeding.stream(seed, stream),
+        members=M,
+        device=device,
+        quiet=quiet,
+        init_state=init_state,
+    )
     model = r.model("cpu")
     with torch_threads(1):
         lls = [_last_layer(model, m, base, data, seed, settings) for m in range(M)]
@@ -275,13 +337,25 @@ def ensemble_posterior(
     s2 = replace(settings, epochs=max(1, int(RTO_FRACTION * settings.epochs)), lr=settings.lr * 0.3)
 
     # phase 1: all members on the measured data
-    log.info("[ensemble] phase 1: %d members on the measured data (%s)", M,
-             "batched on the GPU" if batched else "one task per member")
+    log.info(
+        "[ensemble] phase 1: %d members on the measured data (%s)",
+        M,
+        "batched on the GPU" if batched else "one task per member",
+    )
     if batched:
-        p1 = _phase_batched(base, settings, seed, "init", M, opts.device, quiet, None, base, data, noise, False)
+        p1 = _phase_batched(
+            base, settings, seed, "init", M, opts.device, quiet, None, base, data, noise, False
+        )
     else:
-        p1 = _phase_tasks([MemberTask(m, 1, cfg, data, data, settings, seed, noise, progress=not quiet)
-                           for m in range(M)], executor, "ensemble phase 1", not quiet)
+        p1 = _phase_tasks(
+            [
+                MemberTask(m, 1, cfg, data, data, settings, seed, noise, progress=not quiet)
+                for m in range(M)
+            ],
+            executor,
+            "ensemble phase 1",
+            not quiet,
+        )
     sigma_hat = float(np.median([g.mode for g in p1.grids]))
     # phase 2: randomise-then-optimise
     rng = np.random.default_rng(seeding.stream(seed, "noise"))
@@ -290,28 +364,66 @@ def ensemble_posterior(
     pdata = _rto_data(data, sigma_hat, M, rng)
     log.info("[ensemble] phase 2: randomise-then-optimise (sigma_hat = %.3g)", sigma_hat)
     if batched:
-        problem = Problem.from_config(cfg, pdata, noise_sd=sigma_hat, anchor=(anchors, ei_prior.log_sd))
-        p2 = _phase_batched(problem, s2, seed, "collocation", M, opts.device, quiet, p1.state, base, data, noise,
-                            True)
+        problem = Problem.from_config(
+            cfg, pdata, noise_sd=sigma_hat, anchor=(anchors, ei_prior.log_sd)
+        )
+        p2 = _phase_batched(
+            problem,
+            s2,
+            seed,
+            "collocation",
+            M,
+            opts.device,
+            quiet,
+            p1.state,
+            base,
+            data,
+            noise,
+            True,
+        )
     else:
-        p2 = _phase_tasks([MemberTask(m, 2, cfg, data, pdata[m], s2, seed, noise, noise_sd=sigma_hat,
-                                      anchor=(float(anchors[m]), ei_prior.log_sd), init_state=p1.states[m],
-                                      progress=not quiet) for m in range(M)], executor, "ensemble phase 2",
-                          not quiet)
+        p2 = _phase_tasks(
+            [
+                MemberTask(
+                    m,
+                    2,
+                    cfg,
+                    data,
+                    pdata[m],
+                    s2,
+                    seed,
+                    noise,
+                    noise_sd=sigma_hat,
+                    anchor=(float(anchors[m]), ei_prior.log_sd),
+                    init_state=p1.states[m],
+                    progress=not quiet,
+                )
+                for m in range(M)
+            ],
+            executor,
+            "ensemble phase 2",
+            not quiet,
+        )
     member_EI = p2.EI
     log_ei_m = np.log(member_EI)
     # per member, on the measured data: the noise level's grid posterior and the local width of log EI
     lls, grids = p2.last_layers, p2.grids
     with torch_threads(1):
-        lap_sd = np.array([ll.laplace_sd_log_theta(math.log(ll.theta_fit), math.log(g.mode), ei_prior.log_sd)
-                           for ll, g in zip(lls, grids, strict=True)])
+        lap_sd = np.array(
+            [
+                ll.laplace_sd_log_theta(math.log(ll.theta_fit), math.log(g.mode), ei_prior.log_sd)
+                for ll, g in zip(lls, grids, strict=True)
+            ]
+        )
     between, lap_var, lap_dof, pooled = pool_log_ei(log_ei_m, lap_sd, ei_prior.log_sd)
     warn = []
     if not np.isfinite(lap_sd).all():
         bad = [int(i) for i in np.flatnonzero(~np.isfinite(lap_sd))]
-        warn.append(f"member(s) {bad}: the last-layer marginal likelihood has no peak in EI at the member's own "
-                    "fit, so they give no local (Laplace) width; the interval rests on the other members' widths "
-                    "and on the spread between members")
+        warn.append(
+            f"member(s) {bad}: the last-layer marginal likelihood has no peak in EI at the member's own "
+            "fit, so they give no local (Laplace) width; the interval rests on the other members' widths "
+            "and on the spread between members"
+        )
     mu = float(np.mean(log_ei_m))
     draw_rng = np.random.default_rng(seeding.child(seed, "ensemble", 0))
     log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
@@ -337,26 +449,41 @@ def ensemble_posterior(
     # self-check: members that scatter far more than each one's own (Laplace) uncertainty have not
     # converged to the same answer; the pooled interval then mostly measures optimisation scatter
     if M > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var:
-        msg = (f"the members disagree: their EI spread (sd {math.sqrt(between):.3f} in log EI) is "
-               f"{math.sqrt(between / lap_var):.1f} x each member's own uncertainty ({math.sqrt(lap_var):.3f}); "
-               "training has not converged to one answer, so this interval mostly measures optimisation scatter")
+        msg = (
+            f"the members disagree: their EI spread (sd {math.sqrt(between):.3f} in log EI) is "
+            f"{math.sqrt(between / lap_var):.1f} x each member's own uncertainty ({math.sqrt(lap_var):.3f}); "
+            "training has not converged to one answer, so this interval mostly measures optimisation scatter"
+        )
         warn.append(msg)
     for msg in warn:
         log.warning("[ensemble] %s", msg)
     if warn:
         info["warnings"] = warn
-    diag = {"fit_runtime_s": p1.runtime_s + p2.runtime_s,
-            "beta_factor": float(np.median(p2.beta_factor)),
-            "training": "batched (one network of M members)" if batched else "one task per member"}
+    diag = {
+        "fit_runtime_s": p1.runtime_s + p2.runtime_s,
+        "beta_factor": float(np.median(p2.beta_factor)),
+        "training": "batched (one network of M members)" if batched else "one task per member",
+    }
     predictor = _MixturePredictor(
-        [LastLayerPredictor(ll, np.full(64, math.log(ll.theta_fit)), np.full(64, math.log(g.mode)),
-                            math.log(base.EI_ref) - math.log(f))
-         for ll, g, f in zip(lls, grids, p2.beta_factor, strict=True)]
+        [
+            LastLayerPredictor(
+                ll,
+                np.full(64, math.log(ll.theta_fit)),
+                np.full(64, math.log(g.mode)),
+                math.log(base.EI_ref) - math.log(f),
+            )
+            for ll, g, f in zip(lls, grids, p2.beta_factor, strict=True)
+        ]
     )
-    return Posterior("ensemble", np.exp(log_ei)[None, :], sigma[None, :], diagnostics=diag, info=info,
-                     runtime_s=time.perf_counter() - t0, predictor=predictor)
-
-
+    return Posterior(
+        "ensemble",
+        np.exp(log_ei)[None, :],
+        sigma[None, :],
+        diagnostics=diag,
+        info=info,
+        runtime_s=time.perf_counter() - t0,
+        predictor=predictor,
+    )
 
 
 class _MixturePredictor:
@@ -365,7 +492,9 @@ class _MixturePredictor:
     def __init__(self, parts: list):
         self.parts = parts
 
-    def __call__(self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None) -> np.ndarray:
+    def __call__(
+        self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
+    ) -> np.ndarray:
         rng = rng or np.random.default_rng(0)
         k = max(1, n_draws // len(self.parts))
         return np.concatenate([p(x, t, quantity, k, rng) for p in self.parts])

@@ -79,14 +79,19 @@ VIBRATION_FALSE_ALARM = 0.01
 WEIGHT_PRIOR_FACTOR = 10.0
 
 
-def feature_jet(model: PINN, member: int, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int) -> Jet:
+def feature_jet(
+    model: PINN, member: int, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int
+) -> Jet:
     """Jet of the output layer's basis functions (N, D) of one member at points (N,), float64.
 
     The basis is `PINN.basis_jet`: the last hidden layer's activations, the constant (the output bias),
     and with the fast profile's options the static enrichment and the free vibrations.
     """
-    net = model if (model.members == 1 and member == 0 and model.log_ei.dtype == torch.float64) else (
-        model.member(member).double())
+    net = (
+        model
+        if (model.members == 1 and member == 0 and model.log_ei.dtype == torch.float64)
+        else (model.member(member).double())
+    )
     with torch.no_grad():
         j = net.basis_jet(xi.double().unsqueeze(0), tau.double().unsqueeze(0), kx, kt)
     return j.map(lambda c: c[0])
@@ -137,7 +142,9 @@ class LastLayer:
         T = lambda a: torch.as_tensor(np.asarray(a, float), dtype=torch.float64)  # noqa: E731
         fv_all = model.free_vibration
         self.fv, quiet_pde = None, None
-        if fv_all is not None:  # the first mode follows theta, the higher modes stay (`FreeVibration.split`)
+        if (
+            fv_all is not None
+        ):  # the first mode follows theta, the higher modes stay (`FreeVibration.split`)
             self.fv, _, quiet_pde = fv_all.split(model.head.shape[1])
         self.nv = self.fv.n_features if self.fv is not None else 0
         # data design (SI)
@@ -156,7 +163,9 @@ class LastLayer:
         self.pde_mask = torch.ones(model.head.shape[1], dtype=torch.float64)
         if quiet_pde is not None:
             self.pde_mask[quiet_pde] = 0.0
-        D, P4, P2, Bm, Cm = self.rows(lambda xi, tau, kx, kt: feature_jet(model, member, xi, tau, kx, kt))
+        D, P4, P2, Bm, Cm = self.rows(
+            lambda xi, tau, kx, kt: feature_jet(model, member, xi, tau, kx, kt)
+        )
         # the fitted output weights, and the residual scales they achieve (every column at the fitted EI);
         # the boundary, initial and prior scales are those of the stiffness-scaled weights gamma = theta beta
         beta_fit = model.head[0].detach().double()
@@ -174,7 +183,11 @@ class LastLayer:
         self.y, self.yy = y, float(y @ y)
         self._gram(D, P4, P2, Bm, Cm)
         # does the first mode's frequency carry information here? (module docstring)
-        self.vibration_z2, self.vibration_threshold, self.first_mode_varies = None, None, self.fv is not None
+        self.vibration_z2, self.vibration_threshold, self.first_mode_varies = (
+            None,
+            None,
+            self.fv is not None,
+        )
         if self.fv is not None:
             from scipy.stats import chi2
 
@@ -186,7 +199,9 @@ class LastLayer:
                 vary_first_mode = self.vibration_z2 >= self.vibration_threshold
             if not vary_first_mode:
                 self.first_mode_varies = False
-                if fv_all.pde_exact:  # now an exact homogeneous solution at the fitted EI, like the others
+                if (
+                    fv_all.pde_exact
+                ):  # now an exact homogeneous solution at the fitted EI, like the others
                     self.pde_mask[self.kf :] = 0.0
                     P4, P2 = P4 * self.pde_mask, P2 * self.pde_mask
                 self.fv, self.nv = None, 0
@@ -212,7 +227,9 @@ class LastLayer:
         """The same model (points, scales, priors, first-mode choice) for other design rows, e.g. those of the
         network at other hidden weights (`bpinn_full`). Only for a model whose first mode is held."""
         if self.fv is not None:
-            raise ValueError("with_rows needs a last-layer model whose first mode is held (vary_first_mode=False)")
+            raise ValueError(
+                "with_rows needs a last-layer model whose first mode is held (vary_first_mode=False)"
+            )
         view = copy.copy(self)
         view._gram(D, P4, P2, Bm, Cm)
         return view
@@ -247,7 +264,9 @@ class LastLayer:
             with torch.no_grad():
                 return -float(self.log_marginal(lt, torch.tensor(ls, dtype=torch.float64)))
 
-        r = minimize_scalar(neg, bounds=(c - 1.5, c + 1.5), method="bounded", options={"xatol": 1e-4})
+        r = minimize_scalar(
+            neg, bounds=(c - 1.5, c + 1.5), method="bounded", options={"xatol": 1e-4}
+        )
         return math.exp(float(r.x))
 
     def _design(self, value: torch.Tensor, curv: torch.Tensor | None) -> torch.Tensor:
@@ -258,8 +277,12 @@ class LastLayer:
             out = out + sc.U * (self.a_xx / sc.L**2)[:, None] * curv
         return out
 
-    def _fv_jet(self, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int, log_theta: torch.Tensor) -> Jet:
-        j = self.fv.jet(xi.unsqueeze(0), tau.unsqueeze(0), kx, kt, log_theta.reshape(1), detach=False)
+    def _fv_jet(
+        self, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int, log_theta: torch.Tensor
+    ) -> Jet:
+        j = self.fv.jet(
+            xi.unsqueeze(0), tau.unsqueeze(0), kx, kt, log_theta.reshape(1), detach=False
+        )
         return j.map(lambda c: c[0])
 
     def _varying(self, log_theta: torch.Tensor):
@@ -301,12 +324,19 @@ class LastLayer:
         Lc = torch.linalg.cholesky(A)
         z = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
         logdet = 2 * torch.log(torch.diagonal(Lc)).sum()
-        return -0.5 * (self.yy * inv_s2 + self.ff) + 0.5 * (b @ z) - 0.5 * logdet - self.n * log_sigma
+        return (
+            -0.5 * (self.yy * inv_s2 + self.ff) + 0.5 * (b @ z) - 0.5 * logdet - self.n * log_sigma
+        )
 
-    def weights_posterior(self, log_theta: float, log_sigma: float) -> tuple[torch.Tensor, torch.Tensor]:
+    def weights_posterior(
+        self, log_theta: float, log_sigma: float
+    ) -> tuple[torch.Tensor, torch.Tensor]:
         """Mean (k,) and covariance (k, k) of the output weights beta = gamma / theta given theta and sigma."""
         with torch.no_grad():
-            A, b, _ = self._system(torch.tensor(log_theta, dtype=torch.float64), torch.tensor(log_sigma, dtype=torch.float64))
+            A, b, _ = self._system(
+                torch.tensor(log_theta, dtype=torch.float64),
+                torch.tensor(log_sigma, dtype=torch.float64),
+            )
             Lc = torch.linalg.cholesky(A)
             mean = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
             cov = torch.cholesky_inverse(Lc)
@@ -324,7 +354,9 @@ class LastLayer:
             return float("nan")
         return 1.0 / math.sqrt(-float(h) + 1.0 / prior_sd**2)
 
-    def predictive(self, x, t, kx: int, draws_log_theta, draws_log_sigma, rng: np.random.Generator) -> np.ndarray:
+    def predictive(
+        self, x, t, kx: int, draws_log_theta, draws_log_sigma, rng: np.random.Generator
+    ) -> np.ndarray:
         """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)."""
         sc = self.sc
         T = lambda a: torch.as_tensor(np.array(a, float).ravel(), dtype=torch.float64)  # noqa: E731

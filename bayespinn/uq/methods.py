@@ -36,7 +36,13 @@ def noise_prior(data: Measurements, opts: RunOptions) -> NoisePrior:
     return NoisePrior.build(opts.noise_prior, data.value, opts.snr_db)
 
 
-def infer(method: str, data: Measurements, cfg: Config, seed: int | np.random.SeedSequence, opts: RunOptions) -> Posterior:
+def infer(
+    method: str,
+    data: Measurements,
+    cfg: Config,
+    seed: int | np.random.SeedSequence,
+    opts: RunOptions,
+) -> Posterior:
     """Run one method (CLI name: modal, ensemble, bpinn) on the data."""
     if method == "modal":
         from .modal_mcmc import MCMCSettings, modal_posterior
@@ -52,9 +58,17 @@ def infer(method: str, data: Measurements, cfg: Config, seed: int | np.random.Se
     if method == "ensemble":
         from .ensemble import ensemble_posterior
 
-        return ensemble_posterior(data, cfg, seed=seeding.stream(seed, "ensemble"), opts=opts, noise=noise_prior(data, opts))
+        return ensemble_posterior(
+            data,
+            cfg,
+            seed=seeding.stream(seed, "ensemble"),
+            opts=opts,
+            noise=noise_prior(data, opts),
+        )
     if method == "bpinn":
         from .bpinn import bpinn_posterior
 
-        return bpinn_posterior(data, cfg, seed=seeding.stream(seed, "pyro"), opts=opts, noise=noise_prior(data, opts))
+        return bpinn_posterior(
+            data, cfg, seed=seeding.stream(seed, "pyro"), opts=opts, noise=noise_prior(data, opts)
+        )
     raise InputError("--method", method, "modal, ensemble or bpinn")

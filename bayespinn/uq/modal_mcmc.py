@@ -47,7 +47,11 @@ class ModalLikelihood:
 
     def loglik(self, log_EI: np.ndarray, log_sigma: np.ndarray) -> np.ndarray:
         rss = self.rss(np.exp(log_EI))
-        return -0.5 * rss * np.exp(-2 * log_sigma) - self.n * log_sigma - 0.5 * self.n * math.log(2 * math.pi)
+        return (
+            -0.5 * rss * np.exp(-2 * log_sigma)
+            - self.n * log_sigma
+            - 0.5 * self.n * math.log(2 * math.pi)
+        )
 
 
 class LogPosterior:
@@ -109,11 +113,15 @@ class MarginalLogPosterior:
         out = np.full(le.shape, -np.inf)
         ok = np.abs(le - self.ei_prior.loc) < 12 * self.ei_prior.log_sd
         if ok.any():
-            out[ok] = self.ei_prior.logpdf(le[ok]) - 0.5 * self.lik.n * np.log(self.lik.rss(np.exp(le[ok])))
+            out[ok] = self.ei_prior.logpdf(le[ok]) - 0.5 * self.lik.n * np.log(
+                self.lik.rss(np.exp(le[ok]))
+            )
         return out
 
 
-def choose_modes(cfg: Config, data: Measurements, EI: float, sigma: float, start: int = 6, cap: int = 64):
+def choose_modes(
+    cfg: Config, data: Measurements, EI: float, sigma: float, start: int = 6, cap: int = 64
+):
     """Smallest mode count whose truncation error (against twice as many modes) is below
     TRUNCATION_FRACTION x sigma; returns (n_modes, max abs truncation error)."""
     a_u, a_xx = data.weights
@@ -139,8 +147,14 @@ def prior_only(ei_prior: EIPrior, seed, t0: float, method: str = "modal_mcmc") -
     EI = ei_prior.sample(r, (4, 1000))
     diag = {"converged": True, "scheme": "no data: exact prior draws"}
     info = {"identified": False, "note": "EI is not identified by these data"}
-    return Posterior(method, EI, np.full(EI.shape, np.nan), diagnostics=diag, info=info,
-                     runtime_s=time.perf_counter() - t0)
+    return Posterior(
+        method,
+        EI,
+        np.full(EI.shape, np.nan),
+        diagnostics=diag,
+        info=info,
+        runtime_s=time.perf_counter() - t0,
+    )
 
 
 def modal_posterior(
@@ -176,8 +190,12 @@ def modal_posterior(
         marg = MarginalLogPosterior(lik, ei_prior)
         ch = sample(marg, [le], [sd], s, seed, progress, desc="modal MCMC")
         EI = np.exp(ch.draws[:, :, 0])
-        rss = np.concatenate([lik.rss(c) for c in np.array_split(EI.ravel(), max(1, EI.size // 256))])
-        g = np.random.default_rng(seeding.stream(seed, "noise")).gamma(lik.n / 2.0, 1.0, size=rss.size)
+        rss = np.concatenate(
+            [lik.rss(c) for c in np.array_split(EI.ravel(), max(1, EI.size // 256))]
+        )
+        g = np.random.default_rng(seeding.stream(seed, "noise")).gamma(
+            lik.n / 2.0, 1.0, size=rss.size
+        )
         sig = np.sqrt(rss / (2.0 * g)).reshape(EI.shape)
         sig = np.clip(sig, noise_prior.low, noise_prior.high)
         scheme = "emcee on log EI with sigma marginalised; exact inverse-gamma sigma draws"
@@ -187,10 +205,14 @@ def modal_posterior(
         EI, sig = np.exp(ch.draws[:, :, 0]), np.exp(ch.draws[:, :, 1])
         scheme = "emcee on (log EI, log sigma)"
     diag = mcmc_diagnostics(EI)
-    converged = bool(diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN and diag["ess_tail"] >= ESS_MIN)
+    converged = bool(
+        diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN and diag["ess_tail"] >= ESS_MIN
+    )
     if not converged:
         warnings.warn(
-            f"modal MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}", RuntimeWarning, stacklevel=2
+            f"modal MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}",
+            RuntimeWarning,
+            stacklevel=2,
         )
     diag.update(
         converged=converged,
@@ -203,12 +225,19 @@ def modal_posterior(
         noise_prior=noise_prior.describe(),
         scheme=scheme,
     )
-    info = {"map": {"EI": math.exp(le), "sigma": math.exp(ls)},
-            "identified": bool(np.std(np.log(EI)) < 0.5 * ei_prior.log_sd)}
+    info = {
+        "map": {"EI": math.exp(le), "sigma": math.exp(ls)},
+        "identified": bool(np.std(np.log(EI)) < 0.5 * ei_prior.log_sd),
+    }
     if not info["identified"]:
         info["note"] = "EI is not identified by these data"
     return Posterior(
-        "modal_mcmc", EI, sig, diagnostics=diag, info=info, runtime_s=time.perf_counter() - t0,
+        "modal_mcmc",
+        EI,
+        sig,
+        diagnostics=diag,
+        info=info,
+        runtime_s=time.perf_counter() - t0,
         predictor=ModalPredictor(cfg, EI.ravel(), n_modes),
     )
 
@@ -219,7 +248,9 @@ class ModalPredictor:
     def __init__(self, cfg: Config, EI_draws: np.ndarray, n_modes: int):
         self.cfg, self.EI, self.n_modes = cfg, np.asarray(EI_draws), n_modes
 
-    def __call__(self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None) -> np.ndarray:
+    def __call__(
+        self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
+    ) -> np.ndarray:
         rng = rng or np.random.default_rng(0)
         ei = rng.choice(self.EI, size=min(n_draws, self.EI.size), replace=False)
         x, t = np.broadcast_arrays(np.asarray(x, float).ravel(), np.asarray(t, float).ravel())

@@ -39,7 +39,9 @@ class ChainRun:
     step_size: np.ndarray
     max_tree_depth: int
     warnings: list[str] = field(default_factory=list)
-    nonfinite: int = 0  # potential evaluations that were not finite (treated as outside the support)
+    nonfinite: int = (
+        0  # potential evaluations that were not finite (treated as outside the support)
+    )
 
 
 class _Counted:
@@ -97,10 +99,21 @@ def run_nuts(
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seeding.int_seed(seed))
-        kernel = NUTS(potential_fn=pot, adapt_step_size=True, adapt_mass_matrix=True, full_mass=full_mass,
-                      max_tree_depth=max_tree_depth)
-        mcmc = MCMC(kernel, num_samples=samples, warmup_steps=warmup, initial_params=initial_params,
-                    disable_progbar=not progress, hook_fn=hook)
+        kernel = NUTS(
+            potential_fn=pot,
+            adapt_step_size=True,
+            adapt_mass_matrix=True,
+            full_mass=full_mass,
+            max_tree_depth=max_tree_depth,
+        )
+        mcmc = MCMC(
+            kernel,
+            num_samples=samples,
+            warmup_steps=warmup,
+            initial_params=initial_params,
+            disable_progbar=not progress,
+            hook_fn=hook,
+        )
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             mcmc.run()
@@ -121,7 +134,10 @@ def run_nuts(
 
 def sample_stats(chains: list[ChainRun]) -> dict[str, np.ndarray]:
     """The chains' statistics stacked (chain, draw), as ArviZ's `sample_stats` group names them."""
-    return {k: np.stack([getattr(c, k) for c in chains]) for k in ("lp", "diverging", "tree_depth", "step_size")}
+    return {
+        k: np.stack([getattr(c, k) for c in chains])
+        for k in ("lp", "diverging", "tree_depth", "step_size")
+    }
 
 
 def nuts_health(chains: list[ChainRun]) -> dict:
@@ -135,7 +151,9 @@ def nuts_health(chains: list[ChainRun]) -> dict:
         "max_tree_depth": chains[0].max_tree_depth if chains else None,
         "tree_depth_saturated": int(sum(sat)),
         "tree_depth_saturated_fraction": float(sum(sat) / n) if n else 0.0,
-        "mean_tree_depth": float(np.mean([c.tree_depth.mean() for c in chains])) if n else float("nan"),
+        "mean_tree_depth": float(np.mean([c.tree_depth.mean() for c in chains]))
+        if n
+        else float("nan"),
         "step_size": [float(c.step_size[-1]) if c.step_size.size else float("nan") for c in chains],
         "sampler_warnings": list(dict.fromkeys(m for c in chains for m in c.warnings)),
         "nonfinite_potential": int(sum(c.nonfinite for c in chains)),
@@ -149,14 +167,23 @@ def problems(diag: dict) -> list[str]:
     out = []
     rhat, bulk, tail = diag.get("rhat"), diag.get("ess_bulk"), diag.get("ess_tail")
     if rhat is None or not math.isfinite(rhat) or rhat > RHAT_MAX:
-        out.append(f"R-hat {rhat:.3g} > {RHAT_MAX}" if rhat is not None and math.isfinite(rhat) else "R-hat n/a")
+        out.append(
+            f"R-hat {rhat:.3g} > {RHAT_MAX}"
+            if rhat is not None and math.isfinite(rhat)
+            else "R-hat n/a"
+        )
     for name, v in (("bulk", bulk), ("tail", tail)):
         if v is None or not math.isfinite(v) or v < ESS_MIN:
-            out.append(f"{name} ESS {v:.0f} < {ESS_MIN:.0f}" if v is not None and math.isfinite(v)
-                       else f"{name} ESS n/a")
+            out.append(
+                f"{name} ESS {v:.0f} < {ESS_MIN:.0f}"
+                if v is not None and math.isfinite(v)
+                else f"{name} ESS n/a"
+            )
     if diag.get("divergences"):
         out.append(f"{diag['divergences']} divergent transitions")
     if diag.get("tree_depth_saturated"):
-        out.append(f"{diag['tree_depth_saturated']} trajectories cut at the maximum tree depth "
-                   f"{diag.get('max_tree_depth')}")
+        out.append(
+            f"{diag['tree_depth_saturated']} trajectories cut at the maximum tree depth "
+            f"{diag.get('max_tree_depth')}"
+        )
     return out

@@ -83,7 +83,9 @@ class Posterior:
         self.EI = np.atleast_2d(np.asarray(self.EI, float))
         self.sigma = np.atleast_2d(np.asarray(self.sigma, float))
         if self.EI.shape != self.sigma.shape:
-            raise ValueError(f"EI draws {self.EI.shape} and sigma draws {self.sigma.shape} differ in shape")
+            raise ValueError(
+                f"EI draws {self.EI.shape} and sigma draws {self.sigma.shape} differ in shape"
+            )
 
     def interval(self, level: float = 0.9, var: str = "EI") -> tuple[float, float]:
         """Central credible interval of EI (or sigma) at `level`."""

@@ -73,7 +73,9 @@ class NoisePrior:
             raise InputError("data.value", 0.0, "measurements that are not all zero")
         if kind == "snr":
             if snr_db is None:
-                raise InputError("--noise-prior", "snr", "a nominal SNR in dB (--snr) to centre the prior on")
+                raise InputError(
+                    "--noise-prior", "snr", "a nominal SNR in dB (--snr) to centre the prior on"
+                )
             # data power = signal power + sigma^2, so sigma^2 = power / (10^(snr/10) + 1)
             nominal = rms / math.sqrt(10 ** (snr_db / 10) + 1)
             return cls("snr", VAGUE_LOW * rms, VAGUE_HIGH * rms, nominal, SNR_LOG_SD)
@@ -86,7 +88,9 @@ class NoisePrior:
             val = -math.log(math.log(self.high / self.low))
             return np.where(inside, val, -np.inf)
         z = (ls - math.log(self.center)) / self.log_sd
-        return np.where(inside, -0.5 * z**2 - math.log(self.log_sd * math.sqrt(2 * math.pi)), -np.inf)
+        return np.where(
+            inside, -0.5 * z**2 - math.log(self.log_sd * math.sqrt(2 * math.pi)), -np.inf
+        )
 
     def describe(self) -> str:
         if self.kind == "vague":

@@ -85,7 +85,9 @@ def sample(
         sampler.random_state = rs.get_state()
         samplers.append(sampler)
         states.append(p0)
-    logging.getLogger("emcee").setLevel(logging.ERROR)  # its short-chain warning is our loop condition
+    logging.getLogger("emcee").setLevel(
+        logging.ERROR
+    )  # its short-chain warning is our loop condition
     steps, tau = 0, float("nan")
     bar = None
     if progress:
@@ -101,7 +103,8 @@ def sample(
         if steps < s.min_steps:
             continue
         taus = [
-            emcee.autocorr.integrated_time(sm.get_chain()[steps // 3 :], quiet=True).max() for sm in samplers
+            emcee.autocorr.integrated_time(sm.get_chain()[steps // 3 :], quiet=True).max()
+            for sm in samplers
         ]
         tau = float(np.max(taus))
         need = int(math.ceil((s.tau_factor + s.burn_factor) * tau))
