@@ -6,15 +6,23 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from pathlib import Path
 
 from . import __version__
-from .config import Config, parse_snr, resolve, snr_label
+from .config import parse_snr, snr_label
 from .errors import InputError
+from .options import (
+    METHOD_KEYS,
+    config_from_args,
+    default_out,
+    int_at_least,
+    parse_level,
+    parse_methods,
+    resolve_device,
+)
+
+__all__ = ["METHOD_KEYS", "build_parser", "default_out", "main", "parse_methods", "resolve_device"]
 
 log = logging.getLogger("bayespinn")
-
-METHOD_KEYS = {"modal": "modal_mcmc", "ensemble": "ensemble", "bpinn": "bpinn"}
 
 
 class UsageError(InputError):
@@ -24,46 +32,6 @@ class UsageError(InputError):
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # one line, exit 2, no usage dump
         raise UsageError("command line", " ".join(sys.argv[1:]), message)
-
-
-def _int(name: str, minimum: int):
-    def conv(s: str) -> int:
-        try:
-            v = int(s)
-        except ValueError:
-            raise InputError(name, s, f"an integer >= {minimum}") from None
-        if v < minimum:
-            raise InputError(name, s, f"an integer >= {minimum}")
-        return v
-
-    return conv
-
-
-def parse_methods(text: str, single: bool = False) -> list[str]:
-    """'all' or a comma list of modal, ensemble, bpinn -> ordered list of method names."""
-    names = (
-        ["modal", "ensemble", "bpinn"]
-        if text.strip() == "all"
-        else [m.strip() for m in text.split(",")]
-    )
-    for m in names:
-        if m not in METHOD_KEYS:
-            raise InputError(
-                "--method", text, "modal, ensemble, bpinn, all, or a comma list of them"
-            )
-    if single and len(names) != 1:
-        raise InputError("--method", text, "exactly one of modal, ensemble, bpinn")
-    return [m for m in ("modal", "ensemble", "bpinn") if m in names]
-
-
-def parse_level(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise InputError("--level", text, "a credible level in (0, 1), e.g. 0.9") from None
-    if not 0.0 < v < 1.0:
-        raise InputError("--level", text, "a credible level in (0, 1), e.g. 0.9")
-    return v
 
 
 def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True) -> None:
@@ -77,18 +45,20 @@ def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True
             "--method", default="all", help="modal, ensemble, bpinn, all, or a comma list"
         )
     p.add_argument(
-        "--members", type=_int("--members", 1), default=5, help="ensemble size (default 5)"
+        "--members", type=int_at_least("--members", 1), default=5, help="ensemble size (default 5)"
     )
     p.add_argument("--profile", default="fast", help="smoke, fast (default) or paper")
     p.add_argument("--config", help="TOML file overriding the Exeter preset")
-    p.add_argument("--seed", type=_int("--seed", 0), default=0, help="root seed (default 0)")
+    p.add_argument(
+        "--seed", type=int_at_least("--seed", 0), default=0, help="root seed (default 0)"
+    )
     p.add_argument("--device", default="auto", help="auto, cpu or cuda")
     p.add_argument("--executor", default="local", help="local (process pool) or ray")
     p.add_argument(
         "--address", default=None, help="Ray cluster address (with --executor ray), or 'auto'"
     )
     p.add_argument(
-        "--workers", type=_int("--workers", 1), default=None, help="local worker processes"
+        "--workers", type=int_at_least("--workers", 1), default=None, help="local worker processes"
     )
     p.add_argument("--noise-prior", dest="noise_prior", default="vague", help="vague or snr")
     p.add_argument(
@@ -124,7 +94,7 @@ def build_parser() -> argparse.ArgumentParser:
         "coverage", help="posterior-coverage study over independent synthetic datasets"
     )
     _common(c)
-    c.add_argument("--replicates", type=_int("--replicates", 1), default=100)
+    c.add_argument("--replicates", type=int_at_least("--replicates", 1), default=100)
     c.add_argument("--level", type=parse_level, default=0.9)
     c.add_argument(
         "--truth",
@@ -157,39 +127,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--out", required=False, help="the JSON file to write")
     b.add_argument("--device", default="auto")
     b.add_argument("--quiet", action="store_true")
-    b.add_argument("--seed", type=_int("--seed", 0), default=0)
+    b.add_argument("--seed", type=int_at_least("--seed", 0), default=0)
     return p
-
-
-def resolve_device(name: str) -> str:
-    """'auto' -> 'cuda' when a GPU is usable, else 'cpu'; 'cuda' without a GPU is bad input."""
-    if name not in ("auto", "cpu", "cuda"):
-        raise InputError("--device", name, "auto, cpu or cuda")
-    if name == "cpu":
-        return "cpu"
-    import torch
-
-    has = torch.cuda.is_available()
-    if name == "cuda" and not has:
-        raise InputError(
-            "--device", name, "a machine with a CUDA GPU (none is visible here); use cpu or auto"
-        )
-    return "cuda" if has else "cpu"
-
-
-def _config(args) -> Config:
-    if args.case not in ("deflection", "strain"):
-        raise InputError("--case", args.case, "deflection or strain")
-    if getattr(args, "profile", "fast") not in ("smoke", "fast", "paper"):
-        raise InputError("--profile", args.profile, "smoke, fast or paper")
-    if getattr(args, "bpinn_variant", "auto") not in ("auto", "last-layer", "full"):
-        raise InputError("--bpinn-variant", args.bpinn_variant, "auto, last-layer or full")
-    if getattr(args, "noise_prior", "vague") not in ("vague", "snr"):
-        raise InputError("--noise-prior", args.noise_prior, "vague or snr")
-    if getattr(args, "executor", "local") not in ("local", "ray"):
-        raise InputError("--executor", args.executor, "local or ray")
-    resolve_device(getattr(args, "device", "auto"))
-    return resolve(args.case, args.config)
 
 
 def _cmd_simulate(args) -> int:
@@ -202,7 +141,7 @@ def _cmd_simulate(args) -> int:
     snr = parse_snr(args.snr)
     if not args.out:
         raise InputError("--out", None, "the path of the CSV file to write")
-    cfg = _config(args)
+    cfg = config_from_args(args)
     data = simulate(cfg, snr, args.seed)
     data.to_csv(args.out)
     if not args.quiet:
@@ -264,9 +203,3 @@ def main(argv: list[str] | None = None) -> int:
         log.debug("failure", exc_info=True)
         print(f"bayespinn: failed: {exc.__class__.__name__}: {exc}", file=sys.stderr)
         return 1
-
-
-def default_out(args, kind: str = "runs") -> Path:
-    snr = parse_snr(args.snr) if getattr(args, "snr", None) is not None else None
-    label = "data" if getattr(args, "data", None) else f"snr{snr_label(snr)}"
-    return Path("reports") / kind / f"{args.case}-{label}-seed{args.seed}"

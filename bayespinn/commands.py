@@ -8,10 +8,10 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from .cli import _config, default_out, parse_methods, resolve_device
 from .config import parse_snr
 from .errors import InputError
 from .executor import Executor
+from .options import config_from_args, default_out, parse_methods, resolve_device
 from .uq.methods import RunOptions
 
 log = logging.getLogger("bayespinn")
@@ -38,7 +38,7 @@ def cmd_run(args) -> int:
             "--snr", None, "'clean' or a finite number of dB > 0 (or give --data FILE.csv)"
         )
     snr = parse_snr(args.snr) if args.snr is not None else None
-    cfg = _config(args)
+    cfg = config_from_args(args)
     methods = parse_methods(args.method)
     opts = _opts(args, snr)
     if args.noise_prior == "snr" and (args.data is not None or snr is None):
@@ -73,7 +73,7 @@ def cmd_coverage(args) -> int:
         )
     if args.truth not in ("fixed", "prior"):
         raise InputError("--truth", args.truth, "fixed or prior")
-    cfg = _config(args)
+    cfg = config_from_args(args)
     method = parse_methods(args.method if args.method != "all" else "modal", single=True)[0]
     opts = _opts(args, snr)
     out = (
@@ -123,7 +123,7 @@ def cmd_sweep(args) -> int:
     if args.snr is None:
         raise InputError("--snr", None, "a comma list of levels, e.g. clean,10,20,30,40")
     levels = [parse_snr(s) for s in args.snr.split(",")]
-    cfg = _config(args)
+    cfg = config_from_args(args)
     methods = parse_methods(args.method)
     opts = _opts(args, None)
     out = (

@@ -20,12 +20,12 @@ import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from bayespinn.cli import parse_methods, resolve_device
 from bayespinn.codeversion import method_version
 from bayespinn.config import parse_snr, snr_label
 from bayespinn.data.measurements import atomic_write_text
 from bayespinn.errors import InputError
 from bayespinn.executor import cpu_count
+from bayespinn.options import parse_methods, resolve_device
 from bayespinn.pipeline import git_commit, machine, versions
 from bayespinn.uq.methods import KEYS, RunOptions
 from bayespinn.uq.posterior import jsonable
