@@ -205,10 +205,14 @@ def _show(v) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
+def cli_name(key: str) -> str:
+    """The CLI method name of a summary key (modal_mcmc -> modal)."""
+    return {v: k for k, v in KEYS.items()}[key]
+
+
 def code_versions(method_keys: Iterable[str]) -> dict[str, str]:
     """Today's code version of each method (summary keys), as a run's provenance records it."""
-    cli = {v: k for k, v in KEYS.items()}
-    return {k: method_version(cli[k]) for k in method_keys if k in cli}
+    return {k: method_version(cli_name(k)) for k in method_keys if k in KEYS.values()}
 
 
 def run_is_fresh(prov: dict, method_key: str) -> bool:

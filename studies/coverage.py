@@ -55,13 +55,12 @@ REPLICATES = {"modal": 200, "ensemble": 30, "bpinn": 20}
 FALSE_FAILURE = 0.01
 #: the rank ECDF figure: simultaneous band probability
 ECDF_BAND = 0.99
-CLI_NAME = {"modal_mcmc": "modal", "ensemble": "ensemble", "bpinn": "bpinn"}
 
 
 def freshness(row: dict) -> str:
     """'today's code', or why the row is stale: the code version its replicates were computed by against
     today's (`coverage_version`), and whether its datasets are the older ones shared across SNR levels."""
-    today = coverage_version(CLI_NAME[row["method"]])
+    today = coverage_version(c.cli_name(row["method"]))
     versions = row.get("code_versions") or {}
     if row.get("code_version") is None:
         return "**stale**: predates code versions; not re-run with today's code yet"

@@ -112,9 +112,10 @@ def unbacked(bullet: str) -> list[str]:
 def record_is_fresh(path: str) -> bool | None:
     """Was the record computed by today's code? None for records that carry no code version (table JSON)."""
     from bayespinn.codeversion import method_version
+    from bayespinn.options import METHOD_KEYS
     from bayespinn.uq.coverage import coverage_version
 
-    cli = {"modal_mcmc": "modal", "ensemble": "ensemble", "bpinn": "bpinn"}
+    cli = {v: k for k, v in METHOD_KEYS.items()}
     p = ROOT / path
     doc = json.loads(p.read_text(encoding="utf-8"))
     if doc.get("schema") == "bayespinn.coverage/1":

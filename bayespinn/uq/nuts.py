@@ -94,7 +94,7 @@ def run_nuts(
         state["div"] = ndiv
         stats["tree_depth"].append(max(1, math.ceil(math.log2(n + 1))) if n > 0 else 0)
         stats["step_size"].append(float(kernel.step_size))
-        pe = kernel._potential_energy_last
+        pe = kernel._potential_energy_last  # Pyro's cache of the current state's potential
         stats["lp"].append(-float(pe) if pe is not None else float("nan"))
 
     with torch.random.fork_rng(devices=[]):
