@@ -9,6 +9,7 @@ __version__ = "0.1.0"
 from .config import Beam, Config, Vehicle, preset, resolve  # noqa: E402
 from .data.measurements import Measurements, read_csv  # noqa: E402
 from .data.synthetic import simulate  # noqa: E402
+from .pipeline import RunResult, analyse, write_run  # noqa: E402
 from .uq.posterior import Posterior  # noqa: E402
 
 __all__ = [
@@ -16,9 +17,12 @@ __all__ = [
     "Config",
     "Measurements",
     "Posterior",
+    "RunResult",
     "Vehicle",
+    "analyse",
     "preset",
     "read_csv",
     "resolve",
     "simulate",
+    "write_run",
 ]

@@ -6,7 +6,9 @@ trees (docstrings dropped, so neither formatting nor documentation counts) of th
 bayespinn module it imports, transitively, including imports inside functions. Two results with the
 same code version were computed by the same code; a record whose version differs from today's was
 computed by code that has changed since, and is stale until it is re-run. Package `__init__` files
-hold re-exports only: their imports are followed, their own text is not hashed.
+hold re-exports only: their imports are followed, their own text is not hashed; the root package's
+`__init__` (the public API: `analyse`, `write_run`, ...) is not followed at all, since no method's
+numbers come from it.
 """
 
 from __future__ import annotations
@@ -71,7 +73,9 @@ def imports_of(module: str) -> set[str]:
             names = _resolve(module, node)
         else:
             continue
-        out.update(n for n in names if module_path(n) is not None)
+        # the root package's __init__ holds the public API's re-exports (run, analyse, ...): importing a
+        # submodule runs it, but no method's numbers come from it, so it is never followed
+        out.update(n for n in names if n != PACKAGE and module_path(n) is not None)
     return out
 
 
@@ -84,9 +88,10 @@ def closure(*modules: str) -> list[str]:
         if m in seen:
             continue
         seen.add(m)
-        # a submodule's package __init__ runs first
+        # a submodule's package __init__ runs first (the root package's excepted, see `imports_of`)
         parent = m.rpartition(".")[0]
-        todo.extend(i for i in imports_of(m) | ({parent} if parent else set()) if i not in seen)
+        parents = {parent} if parent and parent != PACKAGE else set()
+        todo.extend(i for i in imports_of(m) | parents if i not in seen)
     return sorted(seen)
 
 

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterable
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from importlib import metadata
@@ -23,6 +24,7 @@ from .config import Config
 from .data.measurements import Measurements, read_csv
 from .data.synthetic import realised_snr, sigma_for_snr, simulate
 from .errors import InputError
+from .options import PROFILES, parse_methods
 from .uq.methods import KEYS, RunOptions, infer
 from .uq.posterior import Posterior, jsonable
 
@@ -34,13 +36,15 @@ WRONG_UNIT = {"deflection": 0.5, "strain": 1e-2}
 
 @dataclass
 class RunResult:
-    """What `run` produced: data, truth (or None), posteriors by summary key, summary dict, timings."""
+    """What `analyse` produced: data, truth (or None), posteriors by summary key, the summary dict (what
+    summary.json holds), the manifest and the configuration."""
 
     data: Measurements
     truth: dict | None
     posteriors: dict[str, Posterior]
     summary: dict
     manifest: dict
+    config: Config | None = None
 
 
 def versions() -> dict:
@@ -147,27 +151,55 @@ def staged_output(out: Path):
     shutil.rmtree(stage, ignore_errors=True)
 
 
-def run(
+def analyse(
+    data: Measurements,
     cfg: Config,
     *,
-    methods: list[str],
-    snr_db: float | None,
+    methods: Iterable[str] | str = ("modal", "ensemble", "bpinn"),
     seed: int = 0,
-    data_path: str | None = None,
-    out: str | Path,
+    profile: str = "fast",
+    truth: dict | None = None,
+    snr_db: float | None = None,
     opts: RunOptions | None = None,
     argv: list[str] | None = None,
-    write_report: bool = True,
+    data_source: str = "in memory",
 ) -> RunResult:
-    """Simulate or load data, run each method, write the contract's files into `out`."""
+    """Run each method on the data, in memory: no file is written (`write_run` writes the run folder).
+
+    Parameters
+    ----------
+    data : the measurements (`simulate` or `read_csv`)
+    cfg : the bridge, vehicle and prior (`resolve`)
+    methods : CLI names ("modal", "ensemble", "bpinn"), a comma string, or "all"
+    seed : the root seed; the result is a function of it
+    profile : "smoke", "fast" or "paper" (ignored when `opts` is given)
+    truth : {"EI": N m^2, "sigma": ...} of synthetic data, or None for measured data
+    snr_db : the nominal SNR of synthetic data [dB] (the `snr` noise prior is centred on it), or None
+    opts : every method option at once (`uq.methods.RunOptions`), as the command line builds them
+
+    Returns
+    -------
+    RunResult with `posteriors` by summary key (e.g. "modal_mcmc"), `summary` (what summary.json holds)
+    and `manifest`.
+    """
     t_start = time.perf_counter()
-    opts = replace(opts or RunOptions(), snr_db=snr_db if data_path is None else None)
-    data, truth = load_data(cfg, data_path, snr_db, seed)
+    names = parse_methods(methods if isinstance(methods, str) else ",".join(methods))
+    if opts is None:
+        if profile not in PROFILES:
+            raise InputError("profile", profile, "smoke, fast or paper")
+        opts = RunOptions(profile=profile)
+    opts = replace(opts, snr_db=snr_db)
+    if truth is not None and not (isinstance(truth, dict) and _positive(truth.get("EI"))):
+        raise InputError("truth", truth, 'None, or a dict with "EI" > 0 in N m^2')
+    vt = data.value_true
+    synthetic = vt is not None and bool(np.all(np.isfinite(vt))) and bool(np.any(vt))
+    if truth is not None and "sigma" not in truth and snr_db is not None and synthetic:
+        truth = {**truth, "sigma": sigma_for_snr(vt, snr_db)}  # the noise level simulate used
     for w in unit_warnings(data):
         log.warning("warning: %s", w)
     posts: dict[str, Posterior] = {}
     timings = {}
-    for m in methods:
+    for m in names:
         log.info("[%s] running on %d %s measurements", KEYS[m], len(data), data.case)
         p = infer(m, data, cfg, seed, opts)
         posts[KEYS[m]] = p
@@ -185,13 +217,13 @@ def run(
     summary = {
         "schema": "bayespinn.summary/1",
         "case": cfg.case,
-        "snr_db": snr_db if data_path is None else None,
+        "snr_db": snr_db,
         "seed": seed,
         "profile": opts.profile,
         "truth": truth,
         "methods": {k: p.summary(truth) for k, p in posts.items()},
     }
-    if data_path is None and snr_db is not None:
+    if snr_db is not None and synthetic:
         summary["realised_snr_db"] = realised_snr(data.value, data.value_true)
     agree = agreement_entries(summary["methods"])
     if agree:
@@ -199,13 +231,11 @@ def run(
     timings["total_s"] = time.perf_counter() - t_start
     manifest = {
         "schema": "bayespinn.manifest/1",
-        "command": argv if argv is not None else sys.argv,
+        "command": list(argv) if argv is not None else list(sys.argv),
         "config": cfg.to_dict(),
         "seed": seed,
-        "snr_db": summary["snr_db"],
-        "data": str(data_path)
-        if data_path
-        else "synthetic (finite-element reference, point loads)",
+        "snr_db": snr_db,
+        "data": data_source,
         "methods": list(posts),
         "options": {
             "profile": opts.profile,
@@ -219,20 +249,61 @@ def run(
         "versions": versions(),
         "git_commit": git_commit(),
         # the code each method's numbers come from (`codeversion`): a record is stale once these change
-        "code_versions": {KEYS[m]: method_version(m) for m in methods},
+        "code_versions": {KEYS[m]: method_version(m) for m in names},
         "timings_s": timings,
     }
-    result = RunResult(data, truth, posts, summary, manifest)
-    with staged_output(Path(out)) as stage:
-        data.to_csv(stage / "data.csv")
-        for k, p in posts.items():
+    return RunResult(data, truth, posts, summary, manifest, cfg)
+
+
+def _positive(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v) and v > 0
+
+
+def write_run(result: RunResult, out: str | Path, *, report: bool = True) -> Path:
+    """Write a run folder from an `analyse` result, all-or-nothing: data.csv, posterior_<key>.nc,
+    report.md/html and figures (unless `report` is False), manifest.json, and summary.json last."""
+    out = Path(out)
+    with staged_output(out) as stage:
+        result.data.to_csv(stage / "data.csv")
+        for k, p in result.posteriors.items():
             p.to_netcdf(stage / f"posterior_{k}.nc")
-        if write_report:
+        if report:
             from .report import write_reports
 
-            write_reports(result, cfg, stage)
-        _write_json(stage / "manifest.json", manifest)
-        _write_json(stage / "summary.json", summary)
+            write_reports(result, result.config, stage)
+        _write_json(stage / "manifest.json", result.manifest)
+        _write_json(stage / "summary.json", result.summary)
+    return out
+
+
+def run(
+    cfg: Config,
+    *,
+    methods: list[str],
+    snr_db: float | None,
+    seed: int = 0,
+    data_path: str | None = None,
+    out: str | Path,
+    opts: RunOptions | None = None,
+    argv: list[str] | None = None,
+    write_report: bool = True,
+) -> RunResult:
+    """Simulate (or load) data, `analyse` it and `write_run` the contract's files into `out`."""
+    data, truth = load_data(cfg, data_path, snr_db, seed)
+    result = analyse(
+        data,
+        cfg,
+        methods=methods,
+        seed=seed,
+        truth=truth,
+        snr_db=snr_db if data_path is None else None,
+        opts=opts or RunOptions(),
+        argv=argv,
+        data_source=str(data_path)
+        if data_path
+        else "synthetic (finite-element reference, point loads)",
+    )
+    write_run(result, out, report=write_report)
     return result
 
 

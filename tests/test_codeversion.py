@@ -9,6 +9,7 @@ def test_a_method_depends_on_its_own_modules_and_the_simulator_only():
     modal = cv.closure(cv.METHOD_MODULES["modal"], *cv.DATA_MODULES)
     assert "bayespinn.uq.modal_mcmc" in modal and "bayespinn.physics.modal" in modal
     assert "bayespinn.data.synthetic" in modal and "bayespinn.physics.fem" in modal
+    assert "bayespinn.seeding" in modal and "bayespinn.config" in modal
     assert not any(m.startswith(("bayespinn.pinn", "bayespinn.report")) for m in modal)
     bpinn = cv.closure(cv.METHOD_MODULES["bpinn"])
     assert (
@@ -35,6 +36,29 @@ def test_version_ignores_docstrings_and_formatting_but_not_code(tmp_path, monkey
     cv._module_digest.cache_clear()
     assert cv.code_version("bayespinn.uq.m") == v0
     (pkg / "helper.py").write_text("A = 2\n")  # an imported module's code changes: a new version
+    cv._module_digest.cache_clear()
+    assert cv.code_version("bayespinn.uq.m") != v0
+    cv._module_digest.cache_clear()
+
+
+def test_the_root_package_init_is_not_followed(tmp_path, monkeypatch):
+    """The public API's re-exports (bayespinn/__init__.py importing the pipeline) change no method's version;
+    a submodule imported through `from .. import x` still counts."""
+    pkg = tmp_path / "bayespinn"
+    (pkg / "uq").mkdir(parents=True)
+    (pkg / "uq" / "__init__.py").write_text("")
+    (pkg / "uq" / "m.py").write_text("from .. import seeding\n\ndef f():\n    return seeding.A\n")
+    (pkg / "seeding.py").write_text("A = 1\n")
+    (pkg / "api.py").write_text("B = 1\n")
+    (pkg / "__init__.py").write_text("from .api import B\n")
+    monkeypatch.setattr(cv, "ROOT", pkg)
+    cv._module_digest.cache_clear()
+    v0 = cv.code_version("bayespinn.uq.m")
+    assert "bayespinn.seeding" in cv.closure("bayespinn.uq.m")
+    (pkg / "api.py").write_text("B = 2\n")
+    cv._module_digest.cache_clear()
+    assert cv.code_version("bayespinn.uq.m") == v0
+    (pkg / "seeding.py").write_text("A = 2\n")
     cv._module_digest.cache_clear()
     assert cv.code_version("bayespinn.uq.m") != v0
     cv._module_digest.cache_clear()

@@ -128,7 +128,10 @@ def data_section(result, cfg: Config) -> list[Block]:
                 f"{s['realised_snr_db']:.2f} dB" if s.get("realised_snr_db") is not None else "n/a",
             ),
             ("true EI", f"{fmt_EI(truth['EI'])} GN m²"),
-            ("true noise sd σ", f"{truth['sigma'] * fs:.4g} {su}"),
+            (
+                "true noise sd σ",
+                f"{truth['sigma'] * fs:.4g} {su}" if truth.get("sigma") is not None else "n/a",
+            ),
         ]
     rows += [("seed", str(s["seed"])), ("profile", f"`{s['profile']}`")]
     out: list[Block] = [Heading("Data"), table(("item", "value"), rows)]

@@ -1,0 +1,92 @@
+"""The Python API of the contract: analyse in memory, write_run, and the README's example as written."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import bayespinn as bp
+from bayespinn.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def readme_example() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    m = re.search(r"^## From Python\n.*?```python\n(.*?)```", text, re.S | re.M)
+    assert m, "README has no '## From Python' section with a python block"
+    return m.group(1)
+
+
+def test_readme_example_runs_as_written(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    exec(compile(readme_example(), "README.md", "exec"), {"__name__": "__readme__"})
+    assert "90 %" in capsys.readouterr().out
+    folder = tmp_path / "reports" / "runs" / "from-python"
+    summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))
+    assert summary["methods"]["modal_mcmc"]["EI"]["rel_error_pct"] is not None
+    assert (folder / "report.html").is_file() and (folder / "posterior_modal_mcmc.nc").is_file()
+
+
+def test_analyse_writes_no_file_and_matches_run(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    cfg = bp.resolve("deflection")
+    data = bp.simulate(cfg, snr_db=20, seed=3)
+    res = bp.analyse(data, cfg, methods="modal", seed=0, profile="smoke", snr_db=20)
+    assert list(tmp_path.iterdir()) == []  # nothing written
+    assert (
+        res.summary["truth"] is None
+        and "rel_error_pct" not in res.summary["methods"]["modal_mcmc"]["EI"]
+    )
+    lo, hi = res.posteriors["modal_mcmc"].interval(0.9)
+    assert lo < res.posteriors["modal_mcmc"].EI.mean() < hi
+    again = bp.analyse(data, cfg, methods=("modal",), seed=0, profile="smoke", snr_db=20)
+    assert (
+        again.summary["methods"]["modal_mcmc"]["EI"] == res.summary["methods"]["modal_mcmc"]["EI"]
+    )
+    out = bp.write_run(res, tmp_path / "run", report=False)
+    assert json.loads((out / "summary.json").read_text())["methods"] == json.loads(
+        json.dumps(res.summary["methods"])
+    )
+
+
+@pytest.mark.parametrize(
+    "kw, field",
+    [
+        ({"methods": ("modal", "mcmc")}, "--method"),
+        ({"profile": "fastest"}, "profile"),
+        ({"truth": {"EI": -1.0}}, "truth"),
+    ],
+)
+def test_analyse_names_the_bad_input(kw, field):
+    cfg = bp.resolve("deflection")
+    data = bp.simulate(cfg, snr_db=20, seed=3)
+    args = {"methods": ("modal",), "profile": "smoke", **kw}
+    with pytest.raises(InputError, match=re.escape(field)):
+        bp.analyse(data, cfg, **args)
+
+
+def test_example_script_runs_with_tiny_settings(tmp_path):
+    r = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "examples" / "from_python.py"),
+            "--profile",
+            "smoke",
+            "--methods",
+            "modal",
+            "--out",
+            str(tmp_path / "ex"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert "modal_mcmc: EI" in r.stdout and (tmp_path / "ex" / "summary.json").is_file()
