@@ -4,13 +4,13 @@ Physics-informed identification of the flexural rigidity EI of a bridge girder f
 a moving load, with posteriors from a modal reference (emcee), deep ensembles of PINNs and a B-PINN.
 """
 
-__version__ = "0.1.0"
-
-from .config import Beam, Config, Vehicle, preset, resolve  # noqa: E402
-from .data.measurements import Measurements, read_csv  # noqa: E402
-from .data.synthetic import simulate  # noqa: E402
-from .pipeline import RunResult, analyse, write_run  # noqa: E402
-from .uq.posterior import Posterior  # noqa: E402
+from . import methods
+from .config import Beam, Config, Vehicle, preset, resolve
+from .data.measurements import Measurements, read_csv
+from .data.synthetic import simulate
+from .pipeline import RunResult, analyse, write_run
+from .uq.posterior import Posterior
+from .version import __version__
 
 __all__ = [
     "Beam",
@@ -19,7 +19,9 @@ __all__ = [
     "Posterior",
     "RunResult",
     "Vehicle",
+    "__version__",
     "analyse",
+    "methods",
     "preset",
     "read_csv",
     "resolve",

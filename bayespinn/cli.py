@@ -7,20 +7,18 @@ import argparse
 import logging
 import sys
 
-from . import __version__
 from .config import parse_snr, snr_label
 from .errors import InputError
 from .options import (
-    METHOD_KEYS,
     config_from_args,
     default_out,
     int_at_least,
     parse_level,
-    parse_methods,
     resolve_device,
 )
+from .version import __version__
 
-__all__ = ["METHOD_KEYS", "build_parser", "default_out", "main", "parse_methods", "resolve_device"]
+__all__ = ["build_parser", "default_out", "main", "resolve_device"]
 
 log = logging.getLogger("bayespinn")
 

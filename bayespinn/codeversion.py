@@ -21,20 +21,18 @@ from pathlib import Path
 PACKAGE = "bayespinn"
 ROOT = Path(__file__).resolve().parent
 
-#: the module of each method (CLI name), whose import closure decides that method's numbers
-METHOD_MODULES = {
-    "modal": "bayespinn.uq.modal_mcmc",
-    "ensemble": "bayespinn.uq.ensemble",
-    "bpinn": "bayespinn.uq.bpinn",
-}
+#: packages whose `__init__` is never followed: the root (the public API's re-exports) and the method
+#: registry (it imports every built-in method to register it; no method's numbers come from another's)
+NOT_FOLLOWED = (PACKAGE, PACKAGE + ".methods")
 #: what every synthetic-data result depends on besides the method: the data simulator
 DATA_MODULES = ("bayespinn.data.synthetic",)
 
 
 def module_path(name: str) -> Path | None:
-    """The source file of a bayespinn module, or None when it is not one."""
+    """The source file of a bayespinn module (or of a user's module that holds a registered method), or
+    None when it is neither."""
     if name != PACKAGE and not name.startswith(PACKAGE + "."):
-        return None
+        return _user_module(name)
     parts = name.split(".")[1:]
     if not parts:
         return ROOT / "__init__.py"
@@ -43,6 +41,17 @@ def module_path(name: str) -> Path | None:
         if cand.is_file():
             return cand
     return None
+
+
+def _user_module(name: str) -> Path | None:
+    import sys
+
+    from . import methods
+
+    if not any(name in c.code_modules() for c in map(methods.get, methods.names())):
+        return None
+    f = getattr(sys.modules.get(name), "__file__", None)
+    return Path(f) if f and f.endswith(".py") and Path(f).is_file() else None
 
 
 def _resolve(module: str, node: ast.ImportFrom) -> list[str]:
@@ -73,9 +82,10 @@ def imports_of(module: str) -> set[str]:
             names = _resolve(module, node)
         else:
             continue
-        # the root package's __init__ holds the public API's re-exports (run, analyse, ...): importing a
-        # submodule runs it, but no method's numbers come from it, so it is never followed
-        out.update(n for n in names if n != PACKAGE and module_path(n) is not None)
+        # the root package's __init__ holds the public API's re-exports (run, analyse, ...) and the method
+        # registry's imports every method: importing a submodule runs them, but no method's numbers come
+        # from them, so they are never followed (`NOT_FOLLOWED`)
+        out.update(n for n in names if n not in NOT_FOLLOWED and module_path(n) is not None)
     return out
 
 
@@ -90,7 +100,7 @@ def closure(*modules: str) -> list[str]:
         seen.add(m)
         # a submodule's package __init__ runs first (the root package's excepted, see `imports_of`)
         parent = m.rpartition(".")[0]
-        parents = {parent} if parent and parent != PACKAGE else set()
+        parents = {parent} if parent and parent not in NOT_FOLLOWED else set()
         todo.extend(i for i in imports_of(m) | parents if i not in seen)
     return sorted(seen)
 
@@ -123,14 +133,17 @@ def code_version(*modules: str) -> str:
 
 
 def method_version(method: str, *extra: str) -> str:
-    """The code version of one method's results on synthetic data (CLI name: modal, ensemble, bpinn).
+    """The code version of one method's results on synthetic data (CLI name: modal, ensemble, bpinn, or a
+    registered method's): its class's `code_modules()`, the data simulator and everything they import.
 
     extra : further modules the result depends on (e.g. the coverage driver for a coverage record)
     """
+    from . import methods
+
     try:
-        mod = METHOD_MODULES[method]
-    except KeyError:
+        mods = methods.get(method).code_modules()
+    except Exception:  # noqa: BLE001 - InputError: not a registered method
         raise ValueError(
-            f"no code version for method {method!r}; known: {', '.join(METHOD_MODULES)}"
+            f"no code version for method {method!r}; known: {', '.join(methods.names())}"
         ) from None
-    return code_version(mod, *DATA_MODULES, *extra)
+    return code_version(*mods, *DATA_MODULES, *extra)

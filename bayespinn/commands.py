@@ -11,8 +11,8 @@ from pathlib import Path
 from .config import parse_snr
 from .errors import InputError
 from .executor import Executor
-from .options import config_from_args, default_out, parse_methods, resolve_device
-from .uq.methods import RunOptions
+from .methods import parse as parse_methods
+from .options import RunOptions, config_from_args, default_out, resolve_device
 
 log = logging.getLogger("bayespinn")
 

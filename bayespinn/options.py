@@ -6,18 +6,33 @@ to exit code 2), so a mistyped profile or method fails the same way from any ent
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 from .config import Config, parse_snr, resolve, snr_label
 from .errors import InputError
 
-#: CLI method name -> summary key
-METHOD_KEYS = {"modal": "modal_mcmc", "ensemble": "ensemble", "bpinn": "bpinn"}
 PROFILES = ("smoke", "fast", "paper")
 BPINN_VARIANTS = ("auto", "last-layer", "full")
 NOISE_PRIORS = ("vague", "snr")
 EXECUTORS = ("local", "ray")
 CASES = ("deflection", "strain")
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """The command line's method options, one bag for every method; each method takes the fields its own
+    settings have (`bayespinn.methods.Method.from_options`)."""
+
+    profile: str = "fast"
+    members: int = 5
+    device: str = "cpu"
+    noise_prior: str = "vague"
+    snr_db: float | None = None
+    progress: bool = False
+    executor: object = None  # bayespinn.executor.Executor for ensemble members
+    mcmc: object = None  # bayespinn.uq.sampler.MCMCSettings overriding the profile's
+    bpinn_variant: str = "auto"  # last-layer, full, or auto (`uq.bpinn_core.resolve_variant`)
 
 
 def int_at_least(name: str, minimum: int):
@@ -33,23 +48,6 @@ def int_at_least(name: str, minimum: int):
         return v
 
     return conv
-
-
-def parse_methods(text: str, single: bool = False) -> list[str]:
-    """'all' or a comma list of modal, ensemble, bpinn -> ordered list of method names."""
-    names = (
-        ["modal", "ensemble", "bpinn"]
-        if text.strip() == "all"
-        else [m.strip() for m in text.split(",")]
-    )
-    for m in names:
-        if m not in METHOD_KEYS:
-            raise InputError(
-                "--method", text, "modal, ensemble, bpinn, all, or a comma list of them"
-            )
-    if single and len(names) != 1:
-        raise InputError("--method", text, "exactly one of modal, ensemble, bpinn")
-    return [m for m in ("modal", "ensemble", "bpinn") if m in names]
 
 
 def parse_level(text: str) -> float:

@@ -18,15 +18,15 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from . import methods as registry
 from .codeversion import method_version
 from .config import Config
 from .data.measurements import Measurements, read_csv
 from .data.synthetic import realised_snr, sigma_for_snr, simulate
 from .errors import InputError
-from .options import PROFILES, parse_methods
-from .uq.methods import KEYS, RunOptions, infer
+from .options import PROFILES, RunOptions
 from .uq.posterior import Posterior, jsonable
+from .version import __version__
 
 log = logging.getLogger(__name__)
 
@@ -170,12 +170,13 @@ def analyse(
     ----------
     data : the measurements (`simulate` or `read_csv`)
     cfg : the bridge, vehicle and prior (`resolve`)
-    methods : CLI names ("modal", "ensemble", "bpinn"), a comma string, or "all"
+    methods : CLI names ("modal", "ensemble", "bpinn", or a registered method's), a comma string, or
+        "all"; or `bayespinn.methods.Method` instances built with their own settings
     seed : the root seed; the result is a function of it
     profile : "smoke", "fast" or "paper" (ignored when `opts` is given)
     truth : {"EI": N m^2, "sigma": ...} of synthetic data, or None for measured data
     snr_db : the nominal SNR of synthetic data [dB] (the `snr` noise prior is centred on it), or None
-    opts : every method option at once (`uq.methods.RunOptions`), as the command line builds them
+    opts : every method option at once (`options.RunOptions`), as the command line builds them
 
     Returns
     -------
@@ -183,12 +184,12 @@ def analyse(
     and `manifest`.
     """
     t_start = time.perf_counter()
-    names = parse_methods(methods if isinstance(methods, str) else ",".join(methods))
     if opts is None:
         if profile not in PROFILES:
             raise InputError("profile", profile, "smoke, fast or paper")
         opts = RunOptions(profile=profile)
     opts = replace(opts, snr_db=snr_db)
+    chosen = _methods(methods, opts)
     if truth is not None and not (isinstance(truth, dict) and _positive(truth.get("EI"))):
         raise InputError("truth", truth, 'None, or a dict with "EI" > 0 in N m^2')
     vt = data.value_true
@@ -199,15 +200,15 @@ def analyse(
         log.warning("warning: %s", w)
     posts: dict[str, Posterior] = {}
     timings = {}
-    for m in names:
-        log.info("[%s] running on %d %s measurements", KEYS[m], len(data), data.case)
-        p = infer(m, data, cfg, seed, opts)
-        posts[KEYS[m]] = p
-        timings[KEYS[m]] = p.runtime_s
+    for m in chosen:
+        log.info("[%s] running on %d %s measurements", m.key, len(data), data.case)
+        p = m.infer(data, cfg, seed=seed)
+        posts[m.key] = p
+        timings[m.key] = p.runtime_s
         s = p.summary(truth)["EI"]
         log.info(
             "[%s] EI = %.4g N m^2 (sd %.3g, 90%% [%.4g, %.4g]) in %.1f s",
-            KEYS[m],
+            m.key,
             s["mean"],
             s["sd"],
             s["ci90"][0],
@@ -249,10 +250,32 @@ def analyse(
         "versions": versions(),
         "git_commit": git_commit(),
         # the code each method's numbers come from (`codeversion`): a record is stale once these change
-        "code_versions": {KEYS[m]: method_version(m) for m in names},
+        "code_versions": {m.key: method_version(m.name) for m in chosen},
         "timings_s": timings,
     }
     return RunResult(data, truth, posts, summary, manifest, cfg)
+
+
+def _methods(methods, opts: RunOptions) -> list:
+    """Method objects from CLI names (a list or a comma string) built with `opts`, or given instances."""
+    if isinstance(methods, str):
+        return [registry.build(n, opts) for n in registry.parse(methods)]
+    items = list(methods)
+    built = [m for m in items if isinstance(m, registry.Method)]
+    names = [m for m in items if not isinstance(m, registry.Method)]
+    if any(not isinstance(n, str) for n in names):
+        raise InputError("methods", methods, "CLI names or bayespinn.methods.Method instances")
+    out = built + [
+        registry.build(n, opts) for n in (registry.parse(",".join(names)) if names else [])
+    ]
+    keys = [m.key for m in out]
+    if len(set(keys)) != len(keys):
+        raise InputError("methods", methods, "each method once")
+    if not out:
+        raise InputError("methods", methods, "at least one method")
+    # the reference first, then registry order (the report compares each with the reference)
+    order = {k: i for i, k in enumerate(registry.keys())}
+    return sorted(out, key=lambda m: order.get(m.key, len(order)))
 
 
 def _positive(v) -> bool:
@@ -266,7 +289,9 @@ def write_run(result: RunResult, out: str | Path, *, report: bool = True) -> Pat
     with staged_output(out) as stage:
         result.data.to_csv(stage / "data.csv")
         for k, p in result.posteriors.items():
-            p.to_netcdf(stage / f"posterior_{k}.nc")
+            p.to_netcdf(
+                stage / f"posterior_{k}.nc", data=result.data, seed=result.summary.get("seed") or 0
+            )
         if report:
             from .report import write_reports
 
@@ -310,7 +335,7 @@ def run(
 def agreement_entries(methods: dict) -> dict:
     """Each PINN posterior against the modal reference of the same data: EI mean difference and sigma mean
     difference in reference sds, the sd ratio, and the verdict (`report.agreement`)."""
-    from .report.agreement import agreement
+    from .uq.agreement import agreement
 
     out = {}
     ref = methods.get("modal_mcmc")

@@ -15,8 +15,8 @@ from pathlib import Path
 
 from .config import Config, snr_label
 from .data.measurements import atomic_write_text
+from .options import RunOptions
 from .pipeline import RunResult, run
-from .uq.methods import RunOptions
 from .uq.posterior import jsonable
 
 log = logging.getLogger(__name__)

@@ -20,20 +20,20 @@ import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
+from bayespinn import methods
 from bayespinn.codeversion import method_version
 from bayespinn.config import parse_snr, snr_label
 from bayespinn.data.measurements import atomic_write_text
 from bayespinn.errors import InputError
 from bayespinn.executor import cpu_count
-from bayespinn.options import parse_methods, resolve_device
+from bayespinn.options import RunOptions, resolve_device
 from bayespinn.pipeline import git_commit, machine, versions
-from bayespinn.uq.methods import KEYS, RunOptions
 from bayespinn.uq.posterior import jsonable
 
 log = logging.getLogger("studies")
 
-#: summary keys in report order
-METHOD_ORDER = ("modal_mcmc", "ensemble", "bpinn")
+#: summary keys in report order (the method registry's)
+METHOD_ORDER = methods.keys()
 
 
 # ------------------------------------------------------------------------------------------ flags
@@ -75,7 +75,7 @@ def parser(description: str) -> argparse.ArgumentParser:
 
 def methods_of(text: str) -> list[str]:
     """CLI method names from a comma list (bayespinn's own parser and order)."""
-    return parse_methods(text)
+    return methods.parse(text)
 
 
 def levels_of(text: str) -> list[float | None]:
@@ -207,12 +207,15 @@ def _show(v) -> str:
 
 def cli_name(key: str) -> str:
     """The CLI method name of a summary key (modal_mcmc -> modal)."""
-    return {v: k for k, v in KEYS.items()}[key]
+    cls = methods.by_key(key)
+    if cls is None:
+        raise KeyError(key)
+    return cls.name
 
 
 def code_versions(method_keys: Iterable[str]) -> dict[str, str]:
     """Today's code version of each method (summary keys), as a run's provenance records it."""
-    return {k: method_version(cli_name(k)) for k in method_keys if k in KEYS.values()}
+    return {k: method_version(cli_name(k)) for k in method_keys if methods.by_key(k) is not None}
 
 
 def run_is_fresh(prov: dict, method_key: str) -> bool:
@@ -364,4 +367,4 @@ def inside(ci, v) -> bool | None:
 
 def key_of(method: str) -> str:
     """Summary key of a CLI method name."""
-    return KEYS[method]
+    return methods.get(method).key

@@ -32,6 +32,7 @@ import numpy as np
 from bayespinn.config import preset, snr_label
 from bayespinn.errors import InputError
 from bayespinn.executor import Executor
+from bayespinn.options import int_at_least
 from bayespinn.report.document import Alert, BulletList, Figure, Heading, Paragraph, table
 from bayespinn.report.units import fmt_pct, name
 from bayespinn.uq.coverage import (
@@ -42,6 +43,9 @@ from bayespinn.uq.coverage import (
     coverage_version,
     paired_with_reference,
     power,
+    replay,
+    replay_path,
+    study_freshness,
     verdict,
 )
 
@@ -57,18 +61,28 @@ FALSE_FAILURE = 0.01
 ECDF_BAND = 0.99
 
 
-def freshness(row: dict) -> str:
-    """'today's code', or why the row is stale: the code version its replicates were computed by against
-    today's (`coverage_version`), and whether its datasets are the older ones shared across SNR levels."""
-    today = coverage_version(c.cli_name(row["method"]))
-    versions = row.get("code_versions") or {}
+def freshness(row: dict, out: Path | None = None) -> str:
+    """'today's code' (directly, or vouched for by an identical replay: `uq.coverage.replay`), or why the row
+    is stale: the code version its replicates were computed by against today's (`coverage_version`)."""
     if row.get("code_version") is None:
         return "**stale**: predates code versions; not re-run with today's code yet"
+    if out is not None and row.get("file") and (out / row["file"]).is_file():
+        fresh, how = study_freshness(out / row["file"])
+        if fresh:
+            return how
+        label, _, rest = how.partition(": ")
+        return f"**mixed**: {rest}" if label == "mixed" else f"**stale**: {how}; not re-run yet"
+    today = coverage_version(c.cli_name(row["method"]))
+    versions = row.get("code_versions") or {}
     if set(versions) == {today}:
         return "today's code"
-    if today in versions:
-        return f"**mixed**: {versions[today]} of {row['replicates']} replicates by today's code"
     return f"**stale**: computed by code {row['code_version']}, today's is {today}; not re-run yet"
+
+
+def code_cell(row: dict) -> str:
+    """The `code` column: the freshness `refresh` stored (bold unless today's code computed or replayed it)."""
+    code = row.get("code") or freshness(row).replace("**", "")
+    return code if code.startswith(("today's code", "replayed")) else f"**{code}**"
 
 
 def datasets(row: dict) -> str:
@@ -142,7 +156,7 @@ def blocks(doc: dict) -> list:
                     else ""
                 ),
                 datasets(r),
-                freshness(r),
+                code_cell(r),
                 c.run_label(doc["runs"], r["run"]),
             )
         )
@@ -352,7 +366,7 @@ def refresh(doc: dict, out: Path, figure: bool = True) -> None:
     for r in doc["rows"]:
         r["verdict"] = verdict(r["hits"], r["replicates"], r["level"], FALSE_FAILURE)
         r["power_vs_80"] = power(r["replicates"], r["level"], POWER_AGAINST, FALSE_FAILURE)
-        r["code"] = freshness(r).replace("**", "")
+        r["code"] = freshness(r, out).replace("**", "")
         r["datasets"] = datasets(r)
         r["acceptance_probability"] = 1 - FALSE_FAILURE
         r["power_against"] = POWER_AGAINST
@@ -369,6 +383,52 @@ def write_page(doc: dict, out: Path) -> None:
     c.write_json(out / "coverage.json", doc)
     c.write_markdown(out / "coverage.md", blocks(doc))
     log.info("wrote %s and %s", out / "coverage.md", out / "coverage.json")
+
+
+def replay_studies(args, argv, methods, levels, cfg, executor, out: Path) -> int:
+    """`--replay N`: certificates for the study files of these methods and levels, then the page."""
+    failed = []
+    for m in methods:
+        key = c.key_of(m)
+        for snr in levels:
+            study = out / "coverage" / f"{key}-snr{snr_label(snr)}.json"
+            if not study.is_file():
+                raise InputError(
+                    "--replay", args.replay, f"a study file {study} to replay (none there)"
+                )
+            doc = json.loads(study.read_text(encoding="utf-8"))
+            n = min(args.replay, int(doc["replicates"]))
+            log.info("replay: %s at %s dB, replicates 0 to %d", key, snr_label(snr), n - 1)
+            cert = replay(
+                doc,
+                m,
+                cfg,
+                indices=list(range(n)),
+                opts=replace(c.run_options(args, snr), progress=False),
+                executor=executor,
+                progress=not args.quiet,
+            )
+            cert["provenance"] = c.provenance(__file__, argv, args, methods=[key], levels=[snr])
+            c.write_json(replay_path(study), cert)
+            log.info(
+                "replay: %s at %s dB: %s (%s)",
+                key,
+                snr_label(snr),
+                "identical" if cert["identical"] else "DIFFERENT",
+                study_freshness(study)[1],
+            )
+            if not cert["identical"]:
+                failed.append(f"{key} at {snr_label(snr)} dB")
+    doc = c.load_table(out / "coverage.json", SCHEMA)
+    if doc["rows"]:
+        write_page(doc, out)
+    if failed:
+        log.error(
+            "replay: today's code does not reproduce %s; those studies stay stale",
+            ", ".join(failed),
+        )
+        return 1
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -397,6 +457,15 @@ def main(argv: list[str] | None = None) -> int:
         help="keep resumed replicates computed by other code than today's (recorded in the study)",
     )
     p.add_argument(
+        "--replay",
+        type=int_at_least("--replay", 1),
+        default=None,
+        metavar="N",
+        help="run no study: re-run the first N replicates of each study file already in --out/coverage with "
+        "today's code, compare them with the stored ones exactly and write the certificate beside the file "
+        "(<study>.replay.json); an identical replay vouches for a study computed by older code",
+    )
+    p.add_argument(
         "--report-only",
         action="store_true",
         help="run nothing: rebuild coverage.md/json from the study files already in --out",
@@ -422,6 +491,8 @@ def main(argv: list[str] | None = None) -> int:
     cfg = preset("deflection")
     keys = [c.key_of(m) for m in methods]
     executor = Executor("local", args.workers)
+    if args.replay:
+        return replay_studies(args, argv, methods, levels, cfg, executor, out)
     prov = c.provenance(
         __file__,
         argv,

@@ -20,11 +20,11 @@ from types import SimpleNamespace
 import common as c
 
 from bayespinn.config import preset
-from bayespinn.report.agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement
 from bayespinn.report.document import Alert, BulletList, Heading, Paragraph, table
 from bayespinn.report.sweep import PAPER_TABLE4, write_sweep_reports
 from bayespinn.report.units import fmt_pct, name
 from bayespinn.sweep import sweep
+from bayespinn.uq.agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement
 
 log = logging.getLogger("studies.table4")
 

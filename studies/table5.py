@@ -27,11 +27,10 @@ import numpy as np
 
 from bayespinn.config import preset, snr_label
 from bayespinn.data.measurements import read_csv
-from bayespinn.pipeline import RunResult, load_data
+from bayespinn.pipeline import analyse, load_data
 from bayespinn.report.document import BulletList, Heading, Paragraph, table
 from bayespinn.report.table5 import HEADER, table5, table5_rows
 from bayespinn.report.units import name
-from bayespinn.uq.methods import infer
 
 log = logging.getLogger("studies.table5")
 
@@ -117,19 +116,19 @@ def one(cfg, method: str, key: str, snr, args, out: Path) -> dict:
         same, runtime = True, entry.get("runtime_s")
     else:
         data, truth, source, t4 = level_data(cfg, out, key, snr, args.seed)
-        post = infer(method, data, cfg, args.seed, c.run_options(args, snr))
-        entry = post.summary(truth)
-        summary = {
-            "schema": "bayespinn.summary/1",
-            "case": "deflection",
-            "snr_db": snr,
-            "seed": args.seed,
-            "profile": args.profile,
-            "truth": truth,
-            "methods": {key: entry},
-        }
-        t5 = table5(RunResult(data, truth, {key: post}, summary, {}), cfg, key)
-        runtime = post.runtime_s
+        result = analyse(
+            data,
+            cfg,
+            methods=[method],
+            seed=args.seed,
+            truth=truth,
+            snr_db=snr,
+            opts=c.run_options(args, snr),
+            data_source=source,
+        )
+        entry = result.summary["methods"][key]
+        t5 = table5(result, cfg, key)
+        runtime = result.posteriors[key].runtime_s
         same = None
         if t4 is not None:
             ref = t4["methods"][key]["EI"]["mean"]

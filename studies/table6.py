@@ -9,8 +9,8 @@ not identified by these data". The paper's 14 % "estimate" without data is a tra
 one deterministic PINN, not a measurement. A method that refuses zero rows is recorded with its
 error message instead of failing the table.
 
-Methods are called through `bayespinn.uq.methods.infer` (`run` needs data rows); scenario (a)'s data,
-posteriors and run reports (with the strain histories at all four gauges, paper Fig. 7) go into
+Each scenario is `bayespinn.analyse` in memory (scenario (b) has no data rows, which `run` cannot
+simulate), then `bayespinn.write_run` where there are data: scenario (a)'s data, posteriors and run reports (with the strain histories at all four gauges, paper Fig. 7) go into
 <out>/table6/<method>/S2/.
 
     python studies/table6.py --methods modal --out reports/paper
@@ -30,11 +30,9 @@ import numpy as np
 from bayespinn.config import preset, snr_label
 from bayespinn.data.synthetic import realised_snr, sigma_for_snr, simulate
 from bayespinn.errors import InputError
-from bayespinn.pipeline import RunResult
-from bayespinn.report import write_reports
+from bayespinn.pipeline import analyse, write_run
 from bayespinn.report.document import Alert, BulletList, Heading, Paragraph, table
 from bayespinn.report.units import fmt_pct, name
-from bayespinn.uq.methods import infer
 
 log = logging.getLogger("studies.table6")
 
@@ -60,49 +58,6 @@ def scenario_data(cfg, snr, seed: int, gauge: str) -> dict:
     }
 
 
-def run_folder(folder: Path, data, cfg, key: str, post, truth: dict, snr, args, prov: dict) -> None:
-    """data.csv, the posterior, summary.json, manifest.json and the run report for one scenario."""
-    summary = {
-        "schema": "bayespinn.summary/1",
-        "case": "strain",
-        "snr_db": snr,
-        "seed": args.seed,
-        "profile": args.profile,
-        "truth": truth,
-        "methods": {key: post.summary(truth)},
-    }
-    manifest = {
-        "schema": "bayespinn.manifest/1",
-        "command": prov["command"],
-        "config": cfg.to_dict(),
-        "seed": args.seed,
-        "snr_db": snr,
-        "data": f"synthetic strain (finite-element reference), gauge {args.gauge} only",
-        "methods": [key],
-        "options": {
-            "profile": args.profile,
-            "members": args.members,
-            "noise_prior": args.noise_prior,
-            "device": prov["machine"]["device"],
-        },
-        "device": prov["machine"]["device"],
-        "versions": prov["versions"],
-        "git_commit": prov["git_commit"],
-        "timings_s": {key: post.runtime_s},
-    }
-    folder.mkdir(parents=True, exist_ok=True)
-    data.to_csv(folder / "data.csv")
-    post.to_netcdf(folder / f"posterior_{key}.nc")
-    try:
-        write_reports(RunResult(data, truth, {key: post}, summary, manifest), cfg, folder)
-    except Exception as exc:  # noqa: BLE001 - the report is an extra; the table must not be lost
-        log.warning(
-            "warning: run report for %s in %s failed: %s: %s", key, folder, type(exc).__name__, exc
-        )
-    c.write_json(folder / "manifest.json", manifest)
-    c.write_json(folder / "summary.json", summary)
-
-
 def one(
     method: str, key: str, scenario: str, data, cfg, snr, sigma: float, args, out: Path, prov: dict
 ) -> dict:
@@ -117,15 +72,29 @@ def one(
         "paper": {"EI": paper[0], "rel_error_pct": paper[1]},
     }
     t0 = time.perf_counter()
+    truth = {"EI": truth_EI, "sigma": sigma} if len(data) else {"EI": truth_EI}
     try:
-        post = infer(method, data, cfg, args.seed, c.run_options(args, snr if len(data) else None))
+        result = analyse(
+            data,
+            cfg,
+            methods=[method],
+            seed=args.seed,
+            truth=truth,
+            snr_db=snr if len(data) else None,
+            opts=c.run_options(args, snr if len(data) else None),
+            argv=prov["command"],
+            data_source=f"synthetic strain (finite-element reference), gauge {args.gauge} only"
+            if len(data)
+            else "no strain data",
+        )
     except Exception as exc:  # noqa: BLE001 - recorded in the table, per the study's design
         log.warning(
             "warning: %s on scenario %s raised %s: %s", key, scenario, type(exc).__name__, exc
         )
         row.update(error=f"{type(exc).__name__}: {exc}", runtime_s=time.perf_counter() - t0)
         return row
-    s = post.summary({"EI": truth_EI})
+    post = result.posteriors[key]
+    s = result.summary["methods"][key]
     ident = post.info.get("identified")
     row.update(
         EI=s["EI"],
@@ -140,9 +109,8 @@ def one(
         summary=s,
     )
     if len(data):
-        truth = {"EI": truth_EI, "sigma": sigma}
         folder = out / "table6" / key / args.gauge
-        run_folder(folder, data, cfg, key, post, truth, snr, args, prov)
+        write_run(result, folder)
         row["folder"] = str(folder.relative_to(out))
     return row
 

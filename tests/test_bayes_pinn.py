@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 import torch
 
+from bayespinn import methods
 from bayespinn.config import preset
 from bayespinn.data.synthetic import simulate
+from bayespinn.options import RunOptions
 from bayespinn.pinn import Problem, TrainSettings, fit
-from bayespinn.uq.bpinn import NUTSSettings, nuts
+from bayespinn.uq.bpinn import nuts
 from bayespinn.uq.lastlayer import LastLayer
-from bayespinn.uq.methods import RunOptions, infer
-from bayespinn.uq.nuts import nuts_health
+from bayespinn.uq.nuts import NUTSSettings, nuts_health
 
 #: float64 Cholesky vs dense log-determinant on ~100-row systems
 EXACT_TOL = 1e-6
@@ -284,8 +285,9 @@ def test_full_weight_nuts_reduces_to_the_last_layer_posterior(smoke_fit):
     """The full-weight sampler end to end (whitening, chains, draws of log EI) with the hidden weights' prior
     held tightly at the fit: its posterior of (log theta, log sigma) must be the last-layer one; a reference
     off by a factor 2 in the sd of log theta must fail the same check."""
-    from bayespinn.uq.bpinn import _laplace_factor, _map, _Potential
+    from bayespinn.uq.bpinn_core import LastLayerPotential
     from bayespinn.uq.bpinn_full import FullHMCSettings, FullWeight, _FullPotential, full_nuts
+    from bayespinn.uq.nuts import laplace_factor, map_estimate
     from bayespinn.uq.priors import EIPrior, NoisePrior
 
     cfg, data, problem, res = smoke_fit
@@ -300,11 +302,13 @@ def test_full_weight_nuts_reduces_to_the_last_layer_posterior(smoke_fit):
         n_ic=10,
         vary_first_mode=False,
     )
-    pot = _Potential(
+    pot = LastLayerPotential(
         ll, EIPrior.from_spec(cfg.prior), NoisePrior.build("vague", data.value, None), 0.0
     )
-    z_map = _map(pot, np.array([math.log(ll.theta_fit), math.log(math.sqrt(ll.fit_rss / ll.n))]))
-    L = _laplace_factor(pot, z_map)
+    z_map = map_estimate(
+        pot, np.array([math.log(ll.theta_fit), math.log(math.sqrt(ll.fit_rss / ll.n))])
+    )
+    L = laplace_factor(pot, z_map)
     ref = nuts(pot, z_map, L, NUTSSettings(4, 200, 500), seed=0, progress=False)[0].reshape(-1, 2)
     mean, sd = ref.mean(0), ref.std(0)
     fw = FullWeight(ll, res.model().member(0))
@@ -318,7 +322,7 @@ def test_full_weight_nuts_reduces_to_the_last_layer_posterior(smoke_fit):
 
 
 def test_bpinn_variant_choice():
-    from bayespinn.uq.bpinn import resolve_variant
+    from bayespinn.uq.bpinn_core import resolve_variant
 
     # the profile decides, not the device: the full sampler takes hours at the fast profile on a GPU too
     assert resolve_variant("auto", "smoke") == resolve_variant("auto", "fast") == "last-layer"
@@ -376,7 +380,7 @@ def test_nuts_recovers_gaussian_and_negative_control():
 
 
 @pytest.mark.parametrize("method", ["bpinn", "bpinn-full", "ensemble"])
-def test_methods_end_to_end_smoke(method):
+def test_methods_end_to_end_smoke(method, tmp_path):
     from bayespinn.uq.bpinn import VARIANT
     from bayespinn.uq.bpinn_full import FULL_VARIANT
 
@@ -386,7 +390,7 @@ def test_methods_end_to_end_smoke(method):
     opts = RunOptions(
         profile="smoke", members=3, snr_db=20.0, bpinn_variant="full" if full else "auto"
     )
-    p = infer(method, data, cfg, 2, opts)
+    p = methods.build(method, opts).infer(data, cfg, seed=2)
     s = p.summary({"EI": cfg.beam.EI})
     assert np.isfinite(s["EI"]["mean"]) and s["EI"]["ci90"][0] < s["EI"]["ci90"][1]
     assert np.isfinite(s["sigma"]["mean"]) and s["sigma"]["mean"] > 0
@@ -400,8 +404,12 @@ def test_methods_end_to_end_smoke(method):
     assert band.shape[1] == 2 and np.all(np.isfinite(band))
     moment = p.predictor(np.array([4.0, 8.0]), np.array([0.8, 1.2]), "moment", 12)
     assert moment.shape == band.shape and np.all(np.isfinite(moment))
+    from arviz_check import check_inference_data
+
+    path = p.to_netcdf(tmp_path / "posterior.nc", data=data, seed=2)
+    check_inference_data(path, data, "nuts" if method == "bpinn" else None)
     if not full:  # the same seed gives the same numbers
-        q = infer(method, data, cfg, 2, opts)
+        q = methods.build(method, opts).infer(data, cfg, seed=2)
         np.testing.assert_allclose(q.EI, p.EI)
 
 
@@ -409,7 +417,7 @@ def test_ensemble_without_data_is_not_identified():
     cfg = preset("strain")
     data = simulate(cfg, 30.0, 0)
     empty = data.select(np.zeros(len(data), bool))
-    p = infer("ensemble", empty, cfg, 0, RunOptions(profile="smoke", members=3))
+    p = methods.build("ensemble", RunOptions(profile="smoke", members=3)).infer(empty, cfg, seed=0)
     s = p.summary()
     assert s["identified"] is False and "not identified" in s["note"]
 

@@ -6,12 +6,18 @@ import bayespinn.codeversion as cv
 
 
 def test_a_method_depends_on_its_own_modules_and_the_simulator_only():
-    modal = cv.closure(cv.METHOD_MODULES["modal"], *cv.DATA_MODULES)
+    from bayespinn import methods
+
+    modal = cv.closure(*methods.get("modal").code_modules(), *cv.DATA_MODULES)
     assert "bayespinn.uq.modal_mcmc" in modal and "bayespinn.physics.modal" in modal
     assert "bayespinn.data.synthetic" in modal and "bayespinn.physics.fem" in modal
     assert "bayespinn.seeding" in modal and "bayespinn.config" in modal
     assert not any(m.startswith(("bayespinn.pinn", "bayespinn.report")) for m in modal)
-    bpinn = cv.closure(cv.METHOD_MODULES["bpinn"])
+    # the registry (which imports every method) is not followed: no method depends on another
+    assert not any(m.startswith(("bayespinn.uq.ensemble", "bayespinn.uq.bpinn")) for m in modal)
+    assert "bayespinn.methods.modal" in modal and "bayespinn.methods.base" in modal
+    bpinn = cv.closure(*methods.get("bpinn").code_modules())
+    assert "bayespinn.uq.bpinn" in bpinn and "bayespinn.uq.bpinn_full" in bpinn  # both variants
     assert (
         "bayespinn.uq.nuts" in bpinn and "bayespinn.pinn.train" in bpinn
     )  # imports inside functions count

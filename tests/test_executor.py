@@ -7,8 +7,8 @@ import pytest
 
 from bayespinn.config import preset
 from bayespinn.executor import Executor
+from bayespinn.options import RunOptions
 from bayespinn.uq.coverage import coverage_study
-from bayespinn.uq.methods import RunOptions
 from bayespinn.uq.sampler import MCMCSettings
 
 SMALL = RunOptions(
@@ -162,18 +162,14 @@ def test_coverage_resumes_from_an_earlier_study_file(tmp_path, monkeypatch):
 def _ensemble(executor, seed=3):
     import numpy as np
 
+    from bayespinn import methods
     from bayespinn.data.synthetic import simulate
-    from bayespinn.uq.methods import infer
 
     cfg = preset()
     data = simulate(cfg, 20.0, seed=1)
-    post = infer(
-        "ensemble",
-        data,
-        cfg,
-        seed,
-        RunOptions(profile="smoke", members=3, device="cpu", executor=executor),
-    )
+    post = methods.build(
+        "ensemble", RunOptions(profile="smoke", members=3, device="cpu", executor=executor)
+    ).infer(data, cfg, seed=seed)
     assert post.diagnostics["training"] == "one task per member"
     return post.info["member_EI"], post.info["member_sigma_mode"], np.asarray(post.EI).ravel()
 

@@ -17,15 +17,25 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def readme_example() -> str:
+    """Every python block of the README's 'From Python' section, in order (one program)."""
     text = (ROOT / "README.md").read_text(encoding="utf-8")
-    m = re.search(r"^## From Python\n.*?```python\n(.*?)```", text, re.S | re.M)
-    assert m, "README has no '## From Python' section with a python block"
-    return m.group(1)
+    m = re.search(r"^## From Python\n(.*?)(?=^## )", text, re.S | re.M)
+    assert m, "README has no '## From Python' section"
+    blocks = re.findall(r"```python\n(.*?)```", m.group(1), re.S)
+    assert blocks, "the 'From Python' section has no python block"
+    return "\n".join(blocks)
 
 
 def test_readme_example_runs_as_written(tmp_path, monkeypatch, capsys):
+    from bayespinn import methods
+
     monkeypatch.chdir(tmp_path)
-    exec(compile(readme_example(), "README.md", "exec"), {"__name__": "__readme__"})
+    before = methods.names()
+    try:
+        exec(compile(readme_example(), "README.md", "exec"), {"__name__": "__readme__"})
+    finally:
+        for n in set(methods.names()) - set(before):  # the example's own method
+            methods.unregister(n)
     assert "90 %" in capsys.readouterr().out
     folder = tmp_path / "reports" / "runs" / "from-python"
     summary = json.loads((folder / "summary.json").read_text(encoding="utf-8"))

@@ -111,21 +111,15 @@ def unbacked(bullet: str) -> list[str]:
 
 def record_is_fresh(path: str) -> bool | None:
     """Was the record computed by today's code? None for records that carry no code version (table JSON)."""
-    from bayespinn.codeversion import method_version
-    from bayespinn.options import METHOD_KEYS
-    from bayespinn.uq.coverage import coverage_version
+    from bayespinn.records import run_freshness
+    from bayespinn.uq.coverage import study_freshness
 
-    cli = {v: k for k, v in METHOD_KEYS.items()}
     p = ROOT / path
     doc = json.loads(p.read_text(encoding="utf-8"))
     if doc.get("schema") == "bayespinn.coverage/1":
-        return set(doc.get("code_versions") or {}) == {coverage_version(cli[doc["method"]])}
+        return study_freshness(p)[0]
     if p.name in ("summary.json", "manifest.json"):
-        man = json.loads((p.parent / "manifest.json").read_text(encoding="utf-8"))
-        recorded = man.get("code_versions")
-        if not recorded:
-            return False
-        return all(v == method_version(cli[k]) for k, v in recorded.items())
+        return run_freshness(p.parent)[0]
     return None
 
 

@@ -9,9 +9,9 @@ from scipy import stats
 
 from bayespinn.config import preset
 from bayespinn.data.synthetic import simulate
+from bayespinn.options import RunOptions
 from bayespinn.physics.modal import ModalModel
 from bayespinn.uq.coverage import binomial_acceptance, coverage_study, paired_with_reference
-from bayespinn.uq.methods import RunOptions
 from bayespinn.uq.modal_mcmc import modal_posterior
 from bayespinn.uq.posterior import Posterior
 from bayespinn.uq.priors import NoisePrior

@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 
 from bayespinn.config import preset
+from bayespinn.options import RunOptions
 from bayespinn.pipeline import RunResult, run
 from bayespinn.report import agreement, table5, table5_markdown, write_reports
 from bayespinn.report import figures as figmod
-from bayespinn.report.agreement import compare
-from bayespinn.report.predictive import fe_truth
 from bayespinn.report.sweep import write_sweep_reports
-from bayespinn.uq.methods import RunOptions
+from bayespinn.uq.agreement import compare
 from bayespinn.uq.modal_mcmc import ModalPredictor
 from bayespinn.uq.posterior import Posterior
+from bayespinn.uq.predictive import fe_truth
 
 RUN_FIGURES = ("fig_posteriors.png", "fig_data_fit.png", "fig_span_profiles.png")
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -77,6 +77,13 @@ def assert_self_contained(folder: Path, expected_figures) -> str:
     for href in re.findall(r'href="([^"]*)"', html):
         assert ":" not in href and not href.startswith("//"), href
     return html
+
+
+def test_modal_posterior_file_serves_arviz(defl):
+    from arviz_check import check_inference_data
+
+    _, res, out = defl
+    check_inference_data(out / "posterior_modal_mcmc.nc", res.data, "emcee")
 
 
 def test_run_writes_figures_and_both_reports(defl):

@@ -82,8 +82,8 @@ def images_as_rendered(page: Path, tmp: Path) -> list[dict]:
 
 def test_every_image_renders_in_chromium(tmp_path):
     from bayespinn.config import preset
+    from bayespinn.options import RunOptions
     from bayespinn.pipeline import run
-    from bayespinn.uq.methods import RunOptions
 
     cfg = preset("deflection")
     cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, n_points=30))

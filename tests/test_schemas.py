@@ -10,8 +10,8 @@ import jsonschema
 import pytest
 
 from bayespinn.config import preset
+from bayespinn.options import RunOptions
 from bayespinn.pipeline import run
-from bayespinn.uq.methods import RunOptions
 
 
 def schema(name: str) -> dict:

@@ -6,7 +6,7 @@
 - `agreement(methods)`: PINN posteriors against the modal reference.
 """
 
-from .agreement import agreement
+from ..uq.agreement import agreement
 from .table5 import table5, table5_markdown
 from .writer import write_reports
 

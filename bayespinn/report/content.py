@@ -7,8 +7,8 @@ import json
 import numpy as np
 
 from ..config import Config, snr_label
+from ..uq.agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement, caveats
 from ..uq.posterior import jsonable
-from .agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement, caveats
 from .document import Alert, Block, BulletList, Code, Figure, Heading, Paragraph, table
 from .figures import FigureFile
 from .table5 import HEADER as T5_HEADER

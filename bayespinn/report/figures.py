@@ -20,14 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import methods
 from ..config import Config, Sensor, snr_label
-from . import predictive as pv
+from ..uq import predictive as pv
 from .files import write_bytes
 from .units import DISPLAY, name, sigma_unit
 
 log = logging.getLogger(__name__)
 
-COLORS = {"modal_mcmc": "#1f5fa8", "ensemble": "#c0392b", "bpinn": "#2e8b3d"}
 TRUTH_STYLE = {"color": "black", "ls": "--", "lw": 1.3}
 DPI = 110
 #: points along the span / along time for the curves
@@ -48,7 +48,7 @@ class FigureFile:
 
 
 def _color(key: str) -> str:
-    return COLORS.get(key, "#7f7f7f")
+    return methods.colour(key)
 
 
 def _band(ax, s, mean, lo, hi, f: float, key: str, lw: float, mean_label: bool = True) -> None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from ..config import Config
 from .document import Alert, Block, BulletList, Code, Figure, Heading, Paragraph, Table
-from .units import NAMES, fmt_EI, sigma_unit  # noqa: F401  (re-exported for older imports)
+from .units import fmt_EI, sigma_unit  # noqa: F401  (re-exported for older imports)
 
 
 def _cell(s: str) -> str:

@@ -12,15 +12,17 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import methods
 from ..config import Config, resolve, snr_label
-from .agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement
+from ..uq.agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement
+from ..uq.table5 import table5
 from .document import Alert, Block, BulletList, Figure, Heading, Paragraph, table
-from .figures import COLORS, DPI, TRUTH_STYLE
+from .figures import DPI, TRUTH_STYLE
 from .files import write_bytes, write_text
 from .html import render_html
 from .markdown import render_markdown
 from .table5 import HEADER as T5_HEADER
-from .table5 import table5, table5_rows
+from .table5 import table5_rows
 from .units import DISPLAY, covers, ei_decimals, fmt_EI, fmt_EI_interval, fmt_EI_sd, fmt_pct, name
 
 log = logging.getLogger(__name__)
@@ -156,7 +158,7 @@ def sweep_figure(doc: dict, truth_EI: float | None, path: Path) -> str:
             mean = np.array([tr(e["mean"]) for _, e in pts])
             c90 = np.array([[tr(e["ci90"][0]), tr(e["ci90"][1])] for _, e in pts])
             c95 = np.array([[tr(e["ci95"][0]), tr(e["ci95"][1])] for _, e in pts])
-            c = COLORS.get(key, "#7f7f7f")
+            c = methods.colour(key)
             ax.errorbar(
                 xs,
                 mean,

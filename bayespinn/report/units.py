@@ -5,11 +5,8 @@ from __future__ import annotations
 
 import math
 
-#: summary key -> name shown in reports
-NAMES = {"modal_mcmc": "Modal reference (emcee)", "ensemble": "Deep ensemble", "bpinn": "B-PINN"}
-#: the methods whose posterior is checked against the modal reference
-PINN_KEYS = ("ensemble", "bpinn")
-REFERENCE_KEY = "modal_mcmc"
+from .. import methods
+from ..uq.agreement import REFERENCE_KEY  # noqa: F401  (the reports' reference key)
 
 #: quantity -> (factor from SI to the display unit, display unit)
 DISPLAY = {
@@ -21,8 +18,8 @@ DISPLAY = {
 
 
 def name(key: str) -> str:
-    """Display name of a method key."""
-    return NAMES.get(key, key)
+    """Display name of a method's summary key (from the method registry; the key itself if unknown)."""
+    return methods.display(key)
 
 
 def fmt_EI(v: float | None, decimals: int = 4) -> str:

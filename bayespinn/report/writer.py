@@ -7,13 +7,13 @@ import logging
 from pathlib import Path
 
 from ..config import Config
-from . import predictive as pv
+from ..uq import predictive as pv
+from ..uq.table5 import table5
 from .content import run_document, title
 from .figures import make_figures
 from .files import write_text
 from .html import render_html
 from .markdown import render_markdown
-from .table5 import table5
 
 log = logging.getLogger(__name__)
 

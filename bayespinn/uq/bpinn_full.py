@@ -50,11 +50,16 @@ import torch
 from torch import nn
 
 from .. import seeding
+from ..config import Config
+from ..data.measurements import Measurements
 from ..pinn.network import PINN
 from ..pinn.taylor import Jet
-from .bpinn import NUTSSettings, _Whitened, valid_start
+from ..threads import torch_threads
+from .bpinn_core import assemble, last_layer_map, log_shift, no_data, warm_start_fit
 from .lastlayer import LastLayer
-from .nuts import nuts_health, run_nuts
+from .nuts import NUTSSettings, Whitened, nuts_health, run_nuts, sample_stats, valid_start
+from .posterior import Posterior
+from .priors import EIPrior, NoisePrior
 
 log = logging.getLogger(__name__)
 
@@ -70,7 +75,7 @@ PREDICTIVE_DRAWS = 100
 
 @dataclass(frozen=True)
 class FullHMCSettings(NUTSSettings):
-    """`bpinn.NUTSSettings` with a lower maximum tree depth (a trajectory costs up to 2^depth - 1 gradients)."""
+    """`nuts.NUTSSettings` with a lower maximum tree depth (a trajectory costs up to 2^depth - 1 gradients)."""
 
     max_tree_depth: int = 8
 
@@ -163,7 +168,7 @@ def _moved(ll: LastLayer, device: torch.device) -> LastLayer:
 class _FullPotential:
     """-log posterior in whitened coordinates (v, u): hidden weights h = m + s_h v (m, s_h the hidden weights'
     prior mean and sd, so the prior term is |v|^2 / 2), and z = (log theta, log sigma) = z_map + L u (L the
-    Laplace factor of the last-layer posterior, as in `bpinn._Whitened`). The model's prior is m = 0,
+    Laplace factor of the last-layer posterior, as in `nuts.Whitened`). The model's prior is m = 0,
     s_h = `HIDDEN_PRIOR_SD`; the tests also use a prior held tightly at the fit, under which this posterior
     must reduce to the last-layer one."""
 
@@ -177,7 +182,7 @@ class _FullPotential:
         prior_sd: float = HIDDEN_PRIOR_SD,
     ):
         self.fw, self.z_pot = fw, z_pot
-        self.zw = _Whitened(z_pot, z_map, L, fw.device)
+        self.zw = Whitened(z_pot, z_map, L, fw.device)
         self.m = torch.zeros_like(fw.h_fit) if prior_mean is None else prior_mean.to(fw.h_fit)
         self.s_h = float(prior_sd)
 
@@ -231,13 +236,51 @@ def full_nuts(pot: _FullPotential, s: FullHMCSettings, seed, progress: bool):
     return np.stack(zs), torch.cat(hs), np.concatenate(hz), runs
 
 
-def sample_full(start, seed, opts, shift):
-    """The full-weight variant of `bpinn._sample`, from `bpinn.last_layer_map`'s (model, LastLayer with the
-    first mode held, potential, MAP, Laplace factor): z draws (chain, draw, 2), diagnostics, predictor."""
+def full_posterior(
+    data: Measurements,
+    cfg: Config,
+    *,
+    seed: int | np.random.SeedSequence,
+    profile: str,
+    device: str,
+    noise: NoisePrior,
+    progress: bool = False,
+) -> Posterior:
+    """Fit a PINN, then sample the full-weight B-PINN posterior (every hidden weight, log EI, log sigma)
+    with NUTS, starting from the last-layer model's MAP with the first mode held."""
+    t0 = time.perf_counter()
+    if len(data) == 0:
+        return no_data(cfg, seed, t0)
+    res, problem, settings = warm_start_fit(data, cfg, seed, profile, device, progress)
+    ei_prior = EIPrior.from_spec(cfg.prior)
+    shift = log_shift(res, problem)
+    with torch_threads(1):  # the last-layer MAP it starts from: tiny linear algebra
+        start = last_layer_map(
+            res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=False
+        )
+    draws, diag, pred, stats = sample_full(start, seed, profile, device, progress, shift)
+    return assemble(
+        draws,
+        diag,
+        pred,
+        stats,
+        res=res,
+        shift=shift,
+        ei_prior=ei_prior,
+        variant="full",
+        name=FULL_VARIANT,
+        t0=t0,
+    )
+
+
+def sample_full(start, seed, profile: str, device: str, progress: bool, shift: float):
+    """The full-weight sampler, from `bpinn_core.last_layer_map`'s (model, LastLayer with the
+    first mode held, potential, MAP, Laplace factor): z draws (chain, draw, 2), diagnostics, predictor and
+    the chains' sample statistics."""
     model, ll, z_pot, z_map, L = start
-    fw = FullWeight(ll, model.member(0), opts.device)
+    fw = FullWeight(ll, model.member(0), device)
     pot = _FullPotential(fw, z_pot, z_map, L)
-    s = FullHMCSettings.for_profile(opts.profile)
+    s = FullHMCSettings.for_profile(profile)
     # one gradient's cost, so the log says what the chains will take
     tg = time.perf_counter()
     probe = {
@@ -258,7 +301,7 @@ def sample_full(start, seed, opts, shift):
         n_iter * g * (2**s.max_tree_depth - 1),
         s.max_tree_depth,
     )
-    draws, h_draws, hz, runs = full_nuts(pot, s, seed, opts.progress)
+    draws, h_draws, hz, runs = full_nuts(pot, s, seed, progress)
     diag = {
         "chains": s.chains,
         "warmup": s.warmup,
@@ -275,7 +318,7 @@ def sample_full(start, seed, opts, shift):
         },
     }
     pred = FullWeightPredictor(fw, h_draws, hz[:, 0], hz[:, 1], shift)
-    return draws, diag, pred
+    return draws, diag, pred, sample_stats(runs)
 
 
 class FullWeightPredictor:

@@ -25,13 +25,13 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from .. import seeding
+from .. import methods, seeding
 from ..codeversion import _module_digest, method_version
 from ..config import Config, snr_label
 from ..data.synthetic import simulate
 from ..errors import InputError
 from ..executor import Executor, task_resources
-from .methods import KEYS, RunOptions, infer
+from ..options import RunOptions
 
 log = logging.getLogger(__name__)
 
@@ -78,7 +78,11 @@ def run_replicate(task: Replicate) -> dict:
         )
         cfg = dataclasses.replace(cfg, beam=dataclasses.replace(cfg.beam, EI=ei))
     data = simulate(cfg, task.snr_db, seq)
-    post = infer(task.method, data, cfg, seq, task.opts)
+    from ..pipeline import analyse
+
+    m = methods.build(task.method, task.opts)
+    res = analyse(data, cfg, methods=[m], seed=seq, snr_db=task.snr_db, opts=task.opts, argv=[])
+    post = res.posteriors[m.key]
     true = cfg.beam.EI
     lo, hi = post.interval(task.level)
     d = post.EI.ravel()
@@ -208,6 +212,139 @@ def earlier_records(path: str | Path, key: str) -> dict[int, dict]:
     return {int(r["index"]): r for r in doc.get("records", [])}
 
 
+def study_options(method: str, snr_db, opts: RunOptions | None) -> RunOptions:
+    """The options every replicate of a study runs with. The replicates are the parallel tasks: inside one,
+    an ensemble's members train one after another in that worker (same results as any other executor; no
+    pool nested in a pool). The modal reference uses the coverage sampler settings unless given others."""
+    opts = dataclasses.replace(
+        opts or RunOptions(), snr_db=snr_db, progress=False, executor=Executor("local", workers=1)
+    )
+    if method == "modal" and opts.mcmc is None:
+        from .sampler import MCMCSettings
+
+        opts = dataclasses.replace(opts, mcmc=MCMCSettings.for_coverage())
+    return opts
+
+
+#: what a replay compares: every field of a replicate's record but the code version that computed it
+REPLAYED_FIELDS = ("EI_true", "hit", "interval", "rank", "rel_error_pct", "sd_rel_pct", "converged")
+
+
+def replay(
+    study: dict,
+    method: str,
+    cfg: Config,
+    *,
+    indices: list[int],
+    opts: RunOptions | None = None,
+    executor: Executor | None = None,
+    progress: bool = False,
+) -> dict:
+    """Re-run replicates `indices` of a study written earlier (`coverage_study`'s JSON) with today's code and
+    compare each record with the stored one, field by field, exactly.
+
+    A study computed by older code is stale (`coverage_version`); when today's code reproduces its
+    replicates bit for bit, the change did not touch what they compute (a refactor), and the study stands
+    for today's code on the strength of this certificate. The replicates' settings must be the study's:
+    the fingerprint of `method`, `cfg`, `opts` and the study's seed, SNR, level and truth must equal the
+    file's, else InputError. Returns the certificate: the study's fingerprint and code versions, today's,
+    the indices replayed, `identical`, and every difference found.
+    """
+    snr_db, seed, level, truth = (study.get(k) for k in ("snr_db", "seed", "level", "truth"))
+    opts = study_options(method, snr_db, opts)
+    key = fingerprint(method, cfg, snr_db, seed, level, truth, opts)
+    if key != study.get("fingerprint"):
+        raise InputError(
+            "replay",
+            study.get("fingerprint"),
+            f"a study of these settings (their fingerprint is {key}: same method, configuration, options, "
+            "seed, SNR, level and truth)",
+        )
+    stored = {int(r["index"]): r for r in study["records"]}
+    missing = [i for i in indices if i not in stored]
+    if missing:
+        raise InputError(
+            "replay", missing, f"replicate indices of the study (0 to {study['replicates'] - 1})"
+        )
+    tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in indices]
+    new = (executor or Executor()).map(
+        run_replicate,
+        tasks,
+        desc=f"replay {method}",
+        progress=progress,
+        resources=task_resources(opts.device if method != "modal" else "cpu"),
+    )
+    from .posterior import jsonable
+
+    diffs = {}
+    for rec in new:
+        old, now = stored[rec["index"]], json.loads(json.dumps(jsonable(rec)))  # as a file holds it
+        d = {f: [old.get(f), now.get(f)] for f in REPLAYED_FIELDS if old.get(f) != now.get(f)}
+        if d:
+            diffs[str(rec["index"])] = d
+    return {
+        "schema": "bayespinn.coverage.replay/1",
+        "method": study.get("method"),
+        "snr_db": snr_db,
+        "fingerprint": key,
+        "study_code_versions": study.get("code_versions") or {str(study.get("code_version")): None},
+        "code_version": coverage_version(method),
+        "indices": list(indices),
+        "fields": list(REPLAYED_FIELDS),
+        "identical": not diffs,
+        "differences": diffs,
+    }
+
+
+def replay_vouches(study: dict, certificate: dict | None, today: str) -> bool:
+    """Does an identical replay by today's code stand for this study? (every replicate of the study was
+    computed by one code version, the one the replay reproduced)"""
+    if (
+        not certificate
+        or not certificate.get("identical")
+        or certificate.get("code_version") != today
+    ):
+        return False
+    versions = set((study.get("code_versions") or {}).keys())
+    return (
+        certificate.get("fingerprint") == study.get("fingerprint")
+        and len(versions) == 1
+        and versions == set(certificate.get("study_code_versions") or {})
+        and len(certificate.get("indices") or []) > 0
+    )
+
+
+def replay_path(study_path: str | Path) -> Path:
+    """Where a study file's replay certificate lives: beside it, <name>.replay.json."""
+    p = Path(study_path)
+    return p.with_name(p.name.removesuffix(".json") + ".replay.json")
+
+
+def study_freshness(study_path: str | Path) -> tuple[bool, str]:
+    """(fresh, how): was this study file computed by today's code, directly or vouched for by an identical
+    replay (`replay`) whose certificate lies beside it?"""
+    from .. import methods
+
+    doc = json.loads(Path(study_path).read_text(encoding="utf-8"))
+    cls = methods.by_key(doc.get("method"))
+    if cls is None:
+        return False, f"no registered method has the key {doc.get('method')!r}"
+    today = coverage_version(cls.name)
+    versions = doc.get("code_versions") or {}
+    if set(versions) == {today}:
+        return True, "today's code"
+    cert_path = replay_path(study_path)
+    cert = json.loads(cert_path.read_text(encoding="utf-8")) if cert_path.is_file() else None
+    if replay_vouches(doc, cert, today):
+        return True, f"replayed: {len(cert['indices'])} replicates identical with today's code"
+    if today in versions:
+        return (
+            False,
+            f"mixed: {versions[today]} of {doc.get('replicates')} replicates by today's code",
+        )
+    return False, f"computed by code {doc.get('code_version')}, today's is {today}"
+
+
 def coverage_study(
     method: str,
     cfg: Config,
@@ -235,15 +372,14 @@ def coverage_study(
         `code_versions` and `mixed_versions`); without it such replicates are refused (InputError)
     """
     t0 = time.perf_counter()
-    # the replicates are the parallel tasks: inside one, an ensemble's members train one after another in
-    # that worker (same results as any other executor; no pool nested in a pool)
-    opts = dataclasses.replace(
-        opts or RunOptions(), snr_db=snr_db, progress=False, executor=Executor("local", workers=1)
-    )
-    if method == "modal" and opts.mcmc is None:
-        from .sampler import MCMCSettings
-
-        opts = dataclasses.replace(opts, mcmc=MCMCSettings.for_coverage())
+    methods.get(method)  # InputError naming --method for an unknown one
+    if isinstance(replicates, bool) or not isinstance(replicates, int) or replicates < 1:
+        raise InputError("--replicates", replicates, "an integer >= 1")
+    if not (isinstance(level, float | int) and 0.0 < level < 1.0):
+        raise InputError("--level", level, "a credible level in (0, 1), e.g. 0.9")
+    if truth not in ("fixed", "prior"):
+        raise InputError("truth", truth, "fixed or prior")
+    opts = study_options(method, snr_db, opts)
     key = fingerprint(method, cfg, snr_db, seed, level, truth, opts)
     earlier = earlier_records(resume_from, key) if resume_from is not None else {}
     ck = Checkpoint(checkpoint, key, earlier) if checkpoint else None
@@ -287,7 +423,7 @@ def coverage_study(
     p = float(stats.kstest(ranks, "uniform").pvalue) if replicates > 1 else float("nan")
     return {
         "schema": "bayespinn.coverage/1",
-        "method": KEYS[method],
+        "method": methods.get(method).key,
         "snr_db": snr_db,
         "level": level,
         "replicates": replicates,

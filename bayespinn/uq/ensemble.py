@@ -44,10 +44,9 @@ from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
 from ..threads import torch_threads
-from .bpinn import IDENTIFIED_FRACTION, LastLayerPredictor
-from .lastlayer import LastLayer
+from .lastlayer import IDENTIFIED_FRACTION, LastLayer, LastLayerPredictor
 from .posterior import Posterior
-from .priors import EIPrior, NoisePrior
+from .priors import EIPrior, NoisePrior, prior_only
 
 log = logging.getLogger(__name__)
 
@@ -307,32 +306,33 @@ def ensemble_posterior(
     cfg: Config,
     *,
     seed: int | np.random.SeedSequence,
-    opts,
+    members: int = 5,
+    profile: str = "fast",
+    device: str = "cpu",
     noise: NoisePrior,
+    executor=None,
+    progress: bool = False,
 ) -> Posterior:
-    """Train M members (phase 1 then randomise-then-optimise) and pool them into a posterior.
+    """Train `members` networks (phase 1 then randomise-then-optimise) and pool them into a posterior.
 
-    On a CPU each member of each phase is one task of `opts.executor` (default: the local process pool,
+    On a CPU each member of each phase is one task of `executor` (default: the local process pool,
     one torch thread per process; Ray with `--executor ray`), so the result does not depend on the
     executor or its number of workers; on CUDA the members train together as one batched network.
     """
     from ..pinn import Problem, TrainSettings
 
     t0 = time.perf_counter()
-    M = int(opts.members)
-    settings = TrainSettings.for_profile(opts.profile)
+    M = int(members)
+    settings = TrainSettings.for_profile(profile)
     ei_prior = EIPrior.from_spec(cfg.prior)
     n = len(data)
     if n == 0:
-        from .modal_mcmc import prior_only
-
         log.warning("[ensemble] no measurements: EI is not identified, returning the prior")
         return prior_only(ei_prior, seed, t0, method="ensemble")
     if not isinstance(seed, np.random.SeedSequence):
         seed = np.random.SeedSequence(int(seed))
-    quiet = not opts.progress
-    batched = _batched(opts.device)
-    executor = getattr(opts, "executor", None)
+    quiet = not progress
+    batched = _batched(device)
     base = Problem.from_config(cfg, data)
     s2 = replace(settings, epochs=max(1, int(RTO_FRACTION * settings.epochs)), lr=settings.lr * 0.3)
 
@@ -344,7 +344,7 @@ def ensemble_posterior(
     )
     if batched:
         p1 = _phase_batched(
-            base, settings, seed, "init", M, opts.device, quiet, None, base, data, noise, False
+            base, settings, seed, "init", M, device, quiet, None, base, data, noise, False
         )
     else:
         p1 = _phase_tasks(
@@ -373,7 +373,7 @@ def ensemble_posterior(
             seed,
             "collocation",
             M,
-            opts.device,
+            device,
             quiet,
             p1.state,
             base,

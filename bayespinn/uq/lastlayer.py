@@ -68,6 +68,7 @@ from ..pinn.losses import moving_load
 from ..pinn.network import PINN
 from ..pinn.problem import Problem
 from ..pinn.taylor import Jet
+from .priors import EIPrior
 
 #: floor of the pseudo-observation sds (non-dimensional), so a perfect fit cannot make them singular
 MIN_PSEUDO_SD = 1e-6
@@ -376,3 +377,31 @@ class LastLayer:
             z = torch.as_tensor(rng.standard_normal(self.k), dtype=torch.float64)
             out[i] = (Phi @ (mean + Lc @ z)).numpy() * scale
         return out
+
+
+#: EI counts as identified when the posterior sd of log EI is below this fraction of the prior's
+IDENTIFIED_FRACTION = 0.5
+
+
+def identified(log_ei_draws: np.ndarray, prior: EIPrior) -> bool:
+    """Do the data move EI away from its prior? (posterior sd of log EI < half the prior sd)"""
+    return bool(np.std(log_ei_draws) < IDENTIFIED_FRACTION * prior.log_sd)
+
+
+class LastLayerPredictor:
+    """Posterior predictive of a last-layer model: deflection, curvature or moment for (EI, sigma) draws."""
+
+    def __init__(self, ll: LastLayer, log_theta: np.ndarray, log_sigma: np.ndarray, shift: float):
+        self.ll, self.lt, self.ls, self.shift = ll, log_theta, log_sigma, shift
+
+    def __call__(
+        self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
+    ) -> np.ndarray:
+        rng = rng or np.random.default_rng(0)
+        idx = rng.choice(self.lt.size, size=min(n_draws, self.lt.size), replace=False)
+        if quantity == "deflection":
+            return self.ll.predictive(x, t, 0, self.lt[idx], self.ls[idx], rng)
+        if quantity in ("curvature", "moment"):
+            k = self.ll.predictive(x, t, 2, self.lt[idx], self.ls[idx], rng)
+            return -np.exp(self.lt[idx] + self.shift)[:, None] * k if quantity == "moment" else k
+        raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")

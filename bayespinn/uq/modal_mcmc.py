@@ -22,7 +22,7 @@ from ..config import Config
 from ..data.measurements import Measurements
 from ..physics.modal import ModalModel
 from .posterior import Posterior, mcmc_diagnostics
-from .priors import EIPrior, NoisePrior
+from .priors import EIPrior, NoisePrior, prior_only
 from .sampler import ESS_MIN, RHAT_MAX, MCMCSettings, sample
 
 log = logging.getLogger(__name__)
@@ -137,26 +137,6 @@ def choose_modes(
         n *= 2
 
 
-def prior_only(ei_prior: EIPrior, seed, t0: float, method: str = "modal_mcmc") -> Posterior:
-    """No measurements: the posterior is the prior (exact draws); sigma is not estimable (NaN).
-
-    Every method returns this when there are no data: the physics alone fixes the shape of the
-    response for any EI, so only measurements can identify EI.
-    """
-    r = np.random.default_rng(seeding.stream(seed, "emcee"))
-    EI = ei_prior.sample(r, (4, 1000))
-    diag = {"converged": True, "scheme": "no data: exact prior draws"}
-    info = {"identified": False, "note": "EI is not identified by these data"}
-    return Posterior(
-        method,
-        EI,
-        np.full(EI.shape, np.nan),
-        diagnostics=diag,
-        info=info,
-        runtime_s=time.perf_counter() - t0,
-    )
-
-
 def modal_posterior(
     data: Measurements,
     cfg: Config,
@@ -239,6 +219,7 @@ def modal_posterior(
         info=info,
         runtime_s=time.perf_counter() - t0,
         predictor=ModalPredictor(cfg, EI.ravel(), n_modes),
+        sample_stats={"lp": ch.lp, "acceptance": ch.walker_acceptance},
     )
 
 

@@ -5,14 +5,15 @@ from __future__ import annotations
 import os
 import tempfile
 import warnings
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-#: method keys of the contract
-METHOD_KEYS = ("modal_mcmc", "ensemble", "bpinn")
+#: posterior predictive draws written beside the posterior (`Posterior.to_inference_data`)
+PREDICTIVE_DRAWS = 200
 
 
 def summarise(draws: np.ndarray, truth: float | None = None) -> dict:
@@ -60,7 +61,7 @@ class Posterior:
 
     Attributes
     ----------
-    method : one of METHOD_KEYS
+    method : the method's summary key ("modal_mcmc", "ensemble", "bpinn", or a registered method's)
     EI, sigma : arrays (chain, draw)
     diagnostics : e.g. rhat, ess_bulk, ess_tail, converged, n_modes, truncation error
     info : method-specific summary entries (members, member_EI, variant, ...), copied into summary.json
@@ -76,10 +77,13 @@ class Posterior:
     #: optional predictive: predictor(x, t, quantity, n_draws, rng) -> array (n_draws, P) of
     #: 'deflection' [m], 'moment' [N m] or 'curvature' (u_xx) [1/m] (strain = -y * curvature)
     predictor: Callable | None = field(default=None, repr=False, compare=False)
+    #: per-draw sample statistics (chain, draw) of a sampler, named as ArviZ's `sample_stats` group names
+    #: them: emcee `lp`, `acceptance`; NUTS `lp`, `diverging`, `step_size`, `tree_depth`
+    sample_stats: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if self.method not in METHOD_KEYS:
-            raise ValueError(f"method must be one of {METHOD_KEYS}, got {self.method!r}")
+        if not isinstance(self.method, str) or not self.method:
+            raise ValueError(f"method must be a method's summary key, got {self.method!r}")
         self.EI = np.atleast_2d(np.asarray(self.EI, float))
         self.sigma = np.atleast_2d(np.asarray(self.sigma, float))
         if self.EI.shape != self.sigma.shape:
@@ -104,26 +108,77 @@ class Posterior:
         out["runtime_s"] = float(self.runtime_s)
         return out
 
-    def to_inference_data(self):
-        """ArviZ InferenceData with posterior variables EI and sigma (chain, draw)."""
+    def predictive_draws(
+        self, data, n_draws: int = PREDICTIVE_DRAWS, seed: int = 0
+    ) -> np.ndarray | None:
+        """Posterior predictive draws at the data points, (n, P) in the data's units: the method's noise-free
+        response for n posterior draws (deflection; strain = -y x curvature on strain rows) plus
+        N(0, sigma^2) noise, sigma drawn from its posterior. None without a predictor, data or finite sigma.
+        A function of `seed`."""
+        sig = self.sigma[np.isfinite(self.sigma)]
+        if self.predictor is None or len(data) == 0 or sig.size == 0:
+            return None
+        ss = np.random.SeedSequence(int(seed), spawn_key=(zlib.crc32(b"posterior_predictive"),))
+        strain = np.asarray(data.kind) == "strain"
+        parts = {}
+        for quantity, rows in (("deflection", ~strain), ("curvature", strain)):
+            if rows.any():
+                # the same generator state for both calls, so both kinds of rows use the same draws
+                r = np.asarray(
+                    self.predictor(
+                        data.x[rows], data.t[rows], quantity, n_draws, np.random.default_rng(ss)
+                    ),
+                    float,
+                )
+                parts[quantity] = -data.y[rows][None, :] * r if quantity == "curvature" else r
+        n = min(p.shape[0] for p in parts.values())
+        resp = np.empty((n, len(data)))
+        if "deflection" in parts:
+            resp[:, ~strain] = parts["deflection"][:n]
+        if "curvature" in parts:
+            resp[:, strain] = parts["curvature"][:n]
+        rng = np.random.default_rng(ss.spawn(1)[0])
+        s = rng.choice(sig, size=n, replace=True)
+        return resp + s[:, None] * rng.standard_normal(resp.shape)
+
+    def to_inference_data(self, data=None, seed: int = 0):
+        """ArviZ InferenceData: `posterior` (EI, sigma; chain, draw) and `sample_stats` where the method is a
+        sampler; with the data also `observed_data` and `constant_data` (y, x, t by observation) and
+        `posterior_predictive` (y at the data points, `predictive_draws`, one chain)."""
         import arviz as az
 
         attrs = {"method": self.method, "runtime_s": float(self.runtime_s)}
         for k, v in {**self.diagnostics, **self.info}.items():
             if isinstance(v, int | float | str | bool | np.floating | np.integer):
                 attrs[f"bayespinn_{k}"] = v if not isinstance(v, bool) else int(v)
-        idata = az.from_dict(posterior={"EI": self.EI, "sigma": self.sigma})
+        groups: dict = {"posterior": {"EI": self.EI, "sigma": self.sigma}}
+        if self.sample_stats:
+            groups["sample_stats"] = {k: np.asarray(v) for k, v in self.sample_stats.items()}
+        dims = {}
+        if data is not None and len(data):
+            groups["observed_data"] = {"y": np.asarray(data.value, float)}
+            groups["constant_data"] = {
+                "x": np.asarray(data.x, float),
+                "t": np.asarray(data.t, float),
+            }
+            dims = {"y": ["obs"], "x": ["obs"], "t": ["obs"]}
+            pp = self.predictive_draws(data, seed=seed)
+            if pp is not None:
+                groups["posterior_predictive"] = {"y": pp[None, :, :]}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # groups of different draw counts
+            idata = az.from_dict(**groups, dims=dims)
         idata.posterior.attrs.update(attrs)
         return idata
 
-    def to_netcdf(self, path: str | Path) -> Path:
-        """Write the InferenceData atomically (temporary file, then rename)."""
+    def to_netcdf(self, path: str | Path, data=None, seed: int = 0) -> Path:
+        """Write the InferenceData (`to_inference_data`) atomically (temporary file, then rename)."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
         os.close(fd)
         try:
-            self.to_inference_data().to_netcdf(tmp, engine="h5netcdf")
+            self.to_inference_data(data, seed).to_netcdf(tmp, engine="h5netcdf")
             from ..data.measurements import _FILE_MODE
 
             os.chmod(tmp, _FILE_MODE)
@@ -142,12 +197,16 @@ class Posterior:
         post = idata.posterior
         attrs = dict(post.attrs)
         diag = {k[len("bayespinn_") :]: v for k, v in attrs.items() if k.startswith("bayespinn_")}
+        stats = {}
+        if "sample_stats" in idata.groups():
+            stats = {k: v.values for k, v in idata.sample_stats.data_vars.items()}
         return cls(
             method=str(attrs.get("method")),
             EI=post["EI"].values,
             sigma=post["sigma"].values,
             diagnostics=diag,
             runtime_s=float(attrs.get("runtime_s", 0.0)),
+            sample_stats=stats,
         )
 
 

@@ -6,12 +6,15 @@ Both act on log-parameters; densities below are with respect to (log EI, log sig
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
+from .. import seeding
 from ..config import PriorSpec
 from ..errors import InputError
+from .posterior import Posterior
 
 NOISE_PRIORS = ("vague", "snr")
 #: sd of log(sigma) for the SNR-conditioned prior: the nominal SNR is known to about +-2 dB
@@ -96,3 +99,23 @@ class NoisePrior:
         if self.kind == "vague":
             return f"log-uniform sigma on [{self.low:.3g}, {self.high:.3g}]"
         return f"log-normal sigma, median {self.center:.3g}, log-sd {self.log_sd}"
+
+
+def prior_only(ei_prior: EIPrior, seed, t0: float, method: str = "modal_mcmc") -> Posterior:
+    """No measurements: the posterior is the prior (exact draws); sigma is not estimable (NaN).
+
+    Every method returns this when there are no data: the physics alone fixes the shape of the
+    response for any EI, so only measurements can identify EI.
+    """
+    r = np.random.default_rng(seeding.stream(seed, "emcee"))
+    EI = ei_prior.sample(r, (4, 1000))
+    diag = {"converged": True, "scheme": "no data: exact prior draws"}
+    info = {"identified": False, "note": "EI is not identified by these data"}
+    return Posterior(
+        method,
+        EI,
+        np.full(EI.shape, np.nan),
+        diagnostics=diag,
+        info=info,
+        runtime_s=time.perf_counter() - t0,
+    )

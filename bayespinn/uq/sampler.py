@@ -47,12 +47,17 @@ class MCMCSettings:
 
 @dataclass
 class Chains:
-    """Draws (group, draw, dim) and run facts."""
+    """Draws (group, draw, dim), per-draw sample statistics (group, draw) and run facts.
+
+    lp: the log density at each draw; acceptance: the acceptance fraction of the walker that made the draw
+    (emcee accepts or rejects per walker, so this is the walker's rate over its whole run)."""
 
     draws: np.ndarray
     tau: float
     steps: int
     acceptance: float
+    lp: np.ndarray | None = None
+    walker_acceptance: np.ndarray | None = None
 
 
 def _group_chain(chain: np.ndarray) -> np.ndarray:
@@ -119,4 +124,11 @@ def sample(
     thin = max(1, int(tau / 4))
     draws = np.stack([_group_chain(sm.get_chain(discard=burn, thin=thin)) for sm in samplers])
     acc = float(np.mean([sm.acceptance_fraction.mean() for sm in samplers]))
-    return Chains(draws, tau, steps, acc)
+    lp = np.stack(
+        [_group_chain(sm.get_log_prob(discard=burn, thin=thin)[..., None])[:, 0] for sm in samplers]
+    )
+    per_walker = []
+    for sm in samplers:
+        kept = sm.get_chain(discard=burn, thin=thin).shape[0]
+        per_walker.append(np.repeat(sm.acceptance_fraction, kept))  # walker by walker, as in draws
+    return Chains(draws, tau, steps, acc, lp, np.stack(per_walker))

@@ -1,0 +1,103 @@
+"""The base of every method: `Method` (a class per method, built from frozen, validated `Settings`) and
+the settings' checks. Method modules import this, never the registry package (`bayespinn.methods`),
+whose `__init__` imports every built-in method to register it."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+from ..errors import InputError
+from ..options import NOISE_PRIORS, PROFILES, RunOptions
+
+if TYPE_CHECKING:
+    from ..config import Config
+    from ..data.measurements import Measurements
+    from ..uq.posterior import Posterior
+
+
+@dataclass(frozen=True)
+class Settings:
+    """What every built-in method is built from; each method extends it with its own fields.
+
+    profile : "smoke", "fast" or "paper" (network size, steps and sampler lengths)
+    noise_prior : "vague" (log-uniform sigma) or "snr" (log-normal around the stated SNR's sigma)
+    snr_db : the nominal SNR [dB] the `snr` noise prior is centred on, or None
+    """
+
+    profile: str = "fast"
+    noise_prior: str = "vague"
+    snr_db: float | None = None
+
+    def __post_init__(self) -> None:
+        check_choice("profile", self.profile, PROFILES)
+        check_choice("noise_prior", self.noise_prior, NOISE_PRIORS)
+        if self.snr_db is not None and not _real(self.snr_db):
+            raise InputError("snr_db", self.snr_db, "a level in dB, or None")
+
+
+def check_choice(field: str, value, choices: Iterable[str]) -> None:
+    choices = tuple(choices)
+    if value not in choices:
+        raise InputError(field, value, " or ".join(", ".join(choices).rsplit(", ", 1)))
+
+
+def check_device(device) -> None:
+    if not (isinstance(device, str) and device.split(":")[0] in ("cpu", "cuda")):
+        raise InputError(
+            "device", device, "cpu or cuda ('auto' is resolved by options.resolve_device)"
+        )
+
+
+def _real(v) -> bool:
+    return isinstance(v, int | float) and not isinstance(v, bool) and v == v
+
+
+class Method:
+    """Base class of an inference method.
+
+    Class attributes: `name` (CLI), `key` (summary.json and the posterior file), `display` (reports),
+    `colour` (figures), `reference` (True for the exact reference the others are judged against),
+    `Settings` (its frozen settings class) and `modules` (the modules whose code decides its numbers,
+    for `bayespinn.codeversion`; default: the class's own module).
+    """
+
+    name: ClassVar[str]
+    key: ClassVar[str]
+    display: ClassVar[str]
+    colour: ClassVar[str] = "#555555"
+    reference: ClassVar[bool] = False
+    Settings: ClassVar[type] = Settings
+    modules: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(self, settings=None, *, progress: bool = False, executor=None, **fields):
+        if settings is None:
+            settings = self.Settings(**fields)
+        elif fields:
+            settings = dataclasses.replace(settings, **fields)
+        if not isinstance(settings, self.Settings):
+            raise InputError(
+                "settings", type(settings).__name__, f"{self.Settings.__name__} for {self.name}"
+            )
+        self.settings = settings
+        self.progress = progress
+        self.executor = executor
+
+    @classmethod
+    def from_options(cls, opts: RunOptions) -> Method:
+        """The method built from the command line's options (the fields its settings have)."""
+        names = {f.name for f in dataclasses.fields(cls.Settings)}
+        values = {k: getattr(opts, k) for k in names if hasattr(opts, k)}
+        return cls(cls.Settings(**values), progress=opts.progress, executor=opts.executor)
+
+    @classmethod
+    def code_modules(cls) -> tuple[str, ...]:
+        return cls.modules or (cls.__module__,)
+
+    def infer(self, data: Measurements, config: Config, *, seed) -> Posterior:
+        raise NotImplementedError
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.settings!r})"

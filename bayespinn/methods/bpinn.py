@@ -1,0 +1,89 @@
+"""The B-PINN, in two variants: last-layer (`uq.bpinn`, the fast default) and full-weight
+(`uq.bpinn_full`). `BPINN` is the registered method (CLI `bpinn`); built from settings it becomes the
+variant they name (`uq.bpinn_core.resolve_variant`: 'auto' is full-weight for the paper profile)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .. import seeding
+from ..options import BPINN_VARIANTS
+from .base import Method, Settings, check_choice, check_device
+
+
+@dataclass(frozen=True)
+class BPINNSettings(Settings):
+    """device: cpu or cuda; bpinn_variant: auto, last-layer or full."""
+
+    device: str = "cpu"
+    bpinn_variant: str = "auto"
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_device(self.device)
+        check_choice("bpinn_variant", self.bpinn_variant, BPINN_VARIANTS)
+
+
+class BPINN(Method):
+    """Bayesian PINN with priors on EI and the noise level, sampled by NUTS (Pyro)."""
+
+    name = "bpinn"
+    key = "bpinn"
+    display = "B-PINN"
+    colour = "#2e8b3d"
+    Settings = BPINNSettings
+    modules = ("bayespinn.methods.bpinn",)  # imports both variants
+
+    def __new__(cls, settings=None, **kw):
+        if cls is BPINN:
+            from ..uq.bpinn_core import resolve_variant
+
+            s = (
+                settings
+                if settings is not None
+                else BPINNSettings(
+                    **{k: v for k, v in kw.items() if k not in ("progress", "executor")}
+                )
+            )
+            if isinstance(s, BPINNSettings):
+                cls = (
+                    FullWeightBPINN
+                    if resolve_variant(s.bpinn_variant, s.profile) == "full"
+                    else LastLayerBPINN
+                )
+        return super().__new__(cls)
+
+    def _sampler(self):
+        raise NotImplementedError
+
+    def infer(self, data, config, *, seed):
+        from ..uq.priors import NoisePrior
+
+        s = self.settings
+        return self._sampler()(
+            data,
+            config,
+            seed=seeding.stream(seed, "pyro"),
+            profile=s.profile,
+            device=s.device,
+            noise=NoisePrior.build(s.noise_prior, data.value, s.snr_db),
+            progress=self.progress,
+        )
+
+
+class LastLayerBPINN(BPINN):
+    """NUTS on log EI and log sigma, the network's output weights integrated out exactly."""
+
+    def _sampler(self):
+        from ..uq.bpinn import lastlayer_posterior
+
+        return lastlayer_posterior
+
+
+class FullWeightBPINN(BPINN):
+    """NUTS on every hidden weight, log EI and log sigma (output weights integrated out exactly)."""
+
+    def _sampler(self):
+        from ..uq.bpinn_full import full_posterior
+
+        return full_posterior

@@ -1,0 +1,118 @@
+"""Committed run records (a run folder's summary.json and manifest.json) and their replays.
+
+A record is fresh when the code versions in its manifest are today's (`codeversion`). When the code
+has changed in a way that should not touch the numbers (a refactor), the record's command is run again
+with today's code and the two summaries are compared exactly (`replay_certificate`): an identical replay,
+kept beside the record as `replay.json`, vouches for it (`run_freshness`). Timings are not compared (a
+machine's load changes them); the record's own timings stay the measured ones.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from .errors import InputError
+
+#: what a replay compares in each method's summary entry, exactly
+COMPARED = ("EI", "sigma")
+REPLAY = "replay.json"
+
+
+def _load(folder: Path, name: str) -> dict:
+    p = Path(folder) / name
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise InputError("record", str(p), f"a readable {name} ({type(exc).__name__})") from None
+
+
+def today_versions(keys) -> dict[str, str]:
+    """Today's code version of each method (summary keys)."""
+    from . import methods
+    from .codeversion import method_version
+
+    out = {}
+    for k in keys:
+        cls = methods.by_key(k)
+        out[k] = method_version(cls.name) if cls is not None else None
+    return out
+
+
+def command_without_out(command: list[str]) -> list[str]:
+    """A run's command line without the program path and its --out value (the parts that decide numbers)."""
+    out, skip = [], False
+    for a in list(command)[1:]:
+        if skip:
+            skip = False
+            continue
+        if a == "--out":
+            skip = True
+            continue
+        if a.startswith("--out="):
+            continue
+        out.append(a)
+    return out
+
+
+def replay_certificate(record: str | Path, rerun: str | Path) -> dict:
+    """Compare a record with a run of the same command by today's code (`rerun`, a run folder).
+
+    InputError when the rerun is not today's code or not the record's command. Returns the certificate:
+    the record's and today's code versions, the command, the fields compared, `identical` and every
+    difference, and the rerun's timings and machine (for the reader, not compared)."""
+    rec_s, rec_m = _load(record, "summary.json"), _load(record, "manifest.json")
+    new_s, new_m = _load(rerun, "summary.json"), _load(rerun, "manifest.json")
+    today = today_versions(rec_m.get("code_versions") or rec_s.get("methods", {}))
+    if new_m.get("code_versions") != today:
+        raise InputError("rerun", str(rerun), f"a run folder computed by today's code {today}")
+    if command_without_out(rec_m.get("command", [])) != command_without_out(
+        new_m.get("command", [])
+    ):
+        raise InputError(
+            "rerun",
+            str(rerun),
+            f"a run of the record's command {' '.join(rec_m.get('command', []))}",
+        )
+    diffs: dict = {}
+    for k, entry in rec_s.get("methods", {}).items():
+        other = new_s.get("methods", {}).get(k, {})
+        for f in COMPARED:
+            if entry.get(f) != other.get(f):
+                diffs.setdefault(k, {})[f] = [entry.get(f), other.get(f)]
+    if rec_s.get("agreement") != new_s.get("agreement"):
+        diffs["agreement"] = [rec_s.get("agreement"), new_s.get("agreement")]
+    return {
+        "schema": "bayespinn.run.replay/1",
+        "record_code_versions": rec_m.get("code_versions"),
+        "code_versions": today,
+        "command": command_without_out(new_m.get("command", [])),
+        "compared": [f"methods.*.{f}" for f in COMPARED] + ["agreement"],
+        "identical": not diffs,
+        "differences": diffs,
+        "rerun_timings_s": new_m.get("timings_s"),
+        "rerun_machine": new_m.get("machine"),
+        "rerun_git_commit": new_m.get("git_commit"),
+    }
+
+
+def run_freshness(record: str | Path) -> tuple[bool, str]:
+    """(fresh, how): was this run record computed by today's code, directly or vouched for by an identical
+    replay (`replay.json` beside it)?"""
+    man = _load(record, "manifest.json")
+    recorded = man.get("code_versions")
+    if not recorded:
+        return False, "predates code versions"
+    today = today_versions(recorded)
+    if recorded == today:
+        return True, "today's code"
+    cert_path = Path(record) / REPLAY
+    if cert_path.is_file():
+        cert = json.loads(cert_path.read_text(encoding="utf-8"))
+        if (
+            cert.get("identical")
+            and cert.get("code_versions") == today
+            and cert.get("record_code_versions") == recorded
+        ):
+            return True, "replayed: identical with today's code"
+    return False, f"computed by code {recorded}, today's is {today}"

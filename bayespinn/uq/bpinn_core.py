@@ -1,0 +1,189 @@
+"""What both B-PINN variants share: the deterministic warm-start fit, the last-layer model's potential in
+(log theta, log sigma) with its MAP and Laplace factor, and the assembling of the posterior (R-hat, ESS,
+the sampler's problems, identifiability, the last-layer self-check).
+
+`bpinn` (last-layer: NUTS on log EI and log sigma) and `bpinn_full` (NUTS on every hidden weight too)
+each import this module and neither imports the other; `bayespinn.methods.bpinn` picks the variant
+(`resolve_variant`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import warnings
+
+import numpy as np
+import torch
+
+from .. import seeding
+from ..config import Config
+from ..data.measurements import Measurements
+from .lastlayer import LastLayer, identified
+from .nuts import laplace_factor, map_estimate, problems
+from .posterior import Posterior, mcmc_diagnostics
+from .priors import EIPrior, NoisePrior, prior_only
+
+log = logging.getLogger(__name__)
+
+#: `--bpinn-variant` choices; 'auto' is `resolve_variant`'s rule
+VARIANTS = ("auto", "last-layer", "full")
+
+
+def resolve_variant(name: str, profile: str) -> str:
+    """'last-layer' or 'full': 'auto' runs the full-weight sampler (`bpinn_full`) for the paper profile, the
+    last-layer one otherwise, on a GPU too.
+
+    The device does not decide it: measured on an H100 (fast profile, 20 dB), one gradient of the full
+    potential took 0.086 s (0.17 s on the 2-core CPU; the small 5 x 64 network's fourth-order jets are
+    launch-bound, not arithmetic-bound) and NUTS warm-up cut its step size to 2.4e-4, the third iteration taking
+    16 s, so the fast profile's 3 200 iterations would take hours on a GPU as well (~20 h at the tree-depth
+    limit); the fast profile promises minutes."""
+    if name not in VARIANTS:
+        raise ValueError(f"B-PINN variant must be one of {', '.join(VARIANTS)}, got {name!r}")
+    if name != "auto":
+        return name
+    return "full" if profile == "paper" else "last-layer"
+
+
+class LastLayerPotential:
+    """-log posterior of z = (log theta, log sigma); theta = EI / EI_ref before the beta correction."""
+
+    def __init__(self, ll: LastLayer, ei_prior: EIPrior, noise: NoisePrior, log_shift: float):
+        self.ll, self.ei_prior, self.noise, self.shift = ll, ei_prior, noise, log_shift
+
+    def log_ei(self, log_theta):
+        return log_theta + self.shift
+
+    def log_prior(self, lt, ls):
+        """log p(EI) + log p(sigma) in (log theta, log sigma), up to a constant."""
+        lp = -0.5 * ((self.log_ei(lt) - self.ei_prior.loc) / self.ei_prior.log_sd) ** 2
+        if self.noise.kind == "snr":
+            lp = lp - 0.5 * ((ls - math.log(self.noise.center)) / self.noise.log_sd) ** 2
+        # vague: log-uniform sigma, constant density; its bounds lie far outside any posterior mass
+        return lp
+
+    def __call__(self, params: dict) -> torch.Tensor:
+        z = params["z"]
+        lt, ls = z[0], z[1]
+        return -(self.ll.log_marginal(lt, ls) + self.log_prior(lt, ls))
+
+
+def warm_start_fit(
+    data: Measurements, cfg: Config, seed, profile: str, device: str, progress: bool
+):
+    """The deterministic PINN fit both variants start from: (fit result, problem, training settings)."""
+    from ..pinn import Problem, TrainSettings, fit
+
+    settings = TrainSettings.for_profile(profile)
+    problem = Problem.from_config(cfg, data)
+    log.info("[bpinn] deterministic warm-start fit (%s profile)", profile)
+    res = fit(
+        problem,
+        settings,
+        seed=seeding.stream(seed, "init"),
+        device=device,
+        quiet=not progress,
+    )
+    return res, problem, settings
+
+
+def no_data(cfg: Config, seed, t0: float) -> Posterior:
+    """No measurements: the prior (`priors.prior_only`)."""
+    log.warning("[bpinn] no measurements: EI is not identified, returning the prior")
+    return prior_only(EIPrior.from_spec(cfg.prior), seed, t0, method="bpinn")
+
+
+def log_shift(res, problem) -> float:
+    """log EI - log theta: EI = EI_ref theta / beta_factor."""
+    return math.log(problem.EI_ref) - math.log(res.beta_factor)
+
+
+def last_layer_map(
+    res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=None
+):
+    """The fit's last-layer model, its potential in (log theta, log sigma), the MAP there and the Laplace
+    factor: (model, LastLayer, potential, z_map, L)."""
+    model = res.model("cpu")
+    rng = np.random.default_rng(seeding.stream(seed, "collocation"))
+    ll = LastLayer(
+        model,
+        0,
+        problem,
+        data,
+        rng,
+        n_pde=settings.n_pde,
+        n_bc=settings.n_bc,
+        n_ic=settings.n_ic,
+        beta_rel=settings.beta_rel,
+        images=settings.images,
+        vary_first_mode=vary_first_mode,
+    )
+    pot = LastLayerPotential(ll, ei_prior, noise, shift)
+    sigma0 = max(math.sqrt(ll.fit_rss / max(ll.n, 1)), noise.low * 10)
+    z_map = map_estimate(pot, np.array([math.log(ll.theta_fit), math.log(sigma0)]))
+    return model, ll, pot, z_map, laplace_factor(pot, z_map)
+
+
+#: a last-layer posterior further than this many of its own sds from the fit it linearises is flagged
+MAX_MOVE_SD = 3.0
+
+
+def assemble(
+    draws: np.ndarray,
+    diag: dict,
+    pred,
+    stats: dict,
+    *,
+    res,
+    shift: float,
+    ei_prior: EIPrior,
+    variant: str,
+    name: str,
+    t0: float,
+) -> Posterior:
+    """The B-PINN posterior from z draws (chain, draw, 2) of (log theta, log sigma): R-hat/ESS, the sampler's
+    problems (which decide `converged`), identifiability and, for the last-layer variant, how far the
+    posterior moved from the fit it linearises."""
+    log_ei = draws[:, :, 0] + shift
+    EI, sigma = np.exp(log_ei), np.exp(draws[:, :, 1])
+    diag = {**mcmc_diagnostics(EI), **diag}
+    trouble = problems(diag)
+    converged = not trouble
+    if not converged:
+        msg = "B-PINN NUTS did not converge: " + "; ".join(trouble)
+        warnings.warn(msg, RuntimeWarning, stacklevel=2)
+        diag["problems"] = trouble
+    ident = identified(log_ei.ravel(), ei_prior)
+    diag.update(
+        converged=converged,
+        fit_EI=float(res.EI),
+        fit_runtime_s=res.runtime_s,
+        beta_factor=res.beta_factor,
+    )
+    info = {"variant": name, "identified": ident}
+    if not ident:
+        info["note"] = "EI is not identified by these data"
+    if variant == "last-layer":
+        # self-check: the last-layer posterior linearises around the fit; it must stay near it
+        moved = abs(float(log_ei.mean()) - math.log(res.EI)) / max(float(log_ei.std()), 1e-12)
+        diag["moved_from_fit_sd"] = moved
+        if moved > MAX_MOVE_SD:
+            msg = (
+                f"the last-layer posterior (EI mean {float(EI.mean()):.4g} N m^2) lies {moved:.1f} posterior sd "
+                f"from the PINN fit it is built on ({float(res.EI):.4g} N m^2): the network has not learnt the "
+                "physics well enough for this approximation, so this interval is not trustworthy"
+            )
+            warnings.warn("B-PINN: " + msg, RuntimeWarning, stacklevel=2)
+            info["warnings"] = [msg]
+    return Posterior(
+        "bpinn",
+        EI,
+        sigma,
+        diagnostics=diag,
+        info=info,
+        runtime_s=time.perf_counter() - t0,
+        predictor=pred,
+        sample_stats=stats,
+    )
