@@ -9,6 +9,7 @@ import sys
 
 from .config import parse_snr, snr_label
 from .errors import InputError
+from .flags import Parser, UsageError, add_method_flags
 from .options import (
     config_from_args,
     default_out,
@@ -18,18 +19,9 @@ from .options import (
 )
 from .version import __version__
 
-__all__ = ["build_parser", "default_out", "main", "resolve_device"]
+__all__ = ["UsageError", "build_parser", "default_out", "main", "resolve_device"]
 
 log = logging.getLogger("bayespinn")
-
-
-class UsageError(InputError):
-    """A flag-level error found by argparse."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str):  # one line, exit 2, no usage dump
-        raise UsageError("command line", " ".join(sys.argv[1:]), message)
 
 
 def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True) -> None:
@@ -42,15 +34,8 @@ def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True
         p.add_argument(
             "--method", default="all", help="modal, ensemble, bpinn, all, or a comma list"
         )
-    p.add_argument(
-        "--members", type=int_at_least("--members", 1), default=5, help="ensemble size (default 5)"
-    )
-    p.add_argument("--profile", default="fast", help="smoke, fast (default) or paper")
+    add_method_flags(p)
     p.add_argument("--config", help="TOML file overriding the Exeter preset")
-    p.add_argument(
-        "--seed", type=int_at_least("--seed", 0), default=0, help="root seed (default 0)"
-    )
-    p.add_argument("--device", default="auto", help="auto, cpu or cuda")
     p.add_argument("--executor", default="local", help="local (process pool) or ray")
     p.add_argument(
         "--address", default=None, help="Ray cluster address (with --executor ray), or 'auto'"
@@ -58,24 +43,15 @@ def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True
     p.add_argument(
         "--workers", type=int_at_least("--workers", 1), default=None, help="local worker processes"
     )
-    p.add_argument("--noise-prior", dest="noise_prior", default="vague", help="vague or snr")
-    p.add_argument(
-        "--bpinn-variant",
-        dest="bpinn_variant",
-        default="auto",
-        help="B-PINN sampler: last-layer, full (every hidden weight), or auto (default: full for "
-        "--profile paper, else last-layer)",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress output")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = _Parser(
+    p = Parser(
         prog="bayespinn",
         description="Girder stiffness (EI) from moving-load measurements, with honest uncertainty.",
     )
     p.add_argument("--version", action="version", version=f"bayespinn {__version__}")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     r = sub.add_parser(
         "run", help="simulate (or load) data, run the UQ methods, write a report folder"

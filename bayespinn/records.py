@@ -55,6 +55,13 @@ def command_without_out(command: list[str]) -> list[str]:
     return out
 
 
+def _untimed(diag: dict | None) -> dict | None:
+    """A method's diagnostics without its wall times (runtime_s, gradient_s, ...), which load changes."""
+    if diag is None:
+        return None
+    return {k: v for k, v in diag.items() if not (k.endswith("_s") or "runtime" in k)}
+
+
 def replay_certificate(record: str | Path, rerun: str | Path) -> dict:
     """Compare a record with a run of the same command by today's code (`rerun`, a run folder).
 
@@ -80,6 +87,9 @@ def replay_certificate(record: str | Path, rerun: str | Path) -> dict:
         for f in COMPARED:
             if entry.get(f) != other.get(f):
                 diffs.setdefault(k, {})[f] = [entry.get(f), other.get(f)]
+        a, b = _untimed(entry.get("diagnostics")), _untimed(other.get("diagnostics"))
+        if a != b:
+            diffs.setdefault(k, {})["diagnostics"] = [a, b]
     if rec_s.get("agreement") != new_s.get("agreement"):
         diffs["agreement"] = [rec_s.get("agreement"), new_s.get("agreement")]
     return {
@@ -87,7 +97,8 @@ def replay_certificate(record: str | Path, rerun: str | Path) -> dict:
         "record_code_versions": rec_m.get("code_versions"),
         "code_versions": today,
         "command": command_without_out(new_m.get("command", [])),
-        "compared": [f"methods.*.{f}" for f in COMPARED] + ["agreement"],
+        "compared": [f"methods.*.{f}" for f in COMPARED]
+        + ["methods.*.diagnostics (but times)", "agreement"],
         "identical": not diffs,
         "differences": diffs,
         "rerun_timings_s": new_m.get("timings_s"),

@@ -26,6 +26,7 @@ from bayespinn.config import parse_snr, snr_label
 from bayespinn.data.measurements import atomic_write_text
 from bayespinn.errors import InputError
 from bayespinn.executor import cpu_count
+from bayespinn.flags import Parser, add_method_flags, check_method_flags
 from bayespinn.options import RunOptions, resolve_device
 from bayespinn.pipeline import git_commit, machine, versions
 from bayespinn.uq.posterior import jsonable
@@ -38,38 +39,16 @@ METHOD_ORDER = methods.keys()
 
 # ------------------------------------------------------------------------------------------ flags
 def parser(description: str) -> argparse.ArgumentParser:
-    """The flags every study script takes."""
-    p = argparse.ArgumentParser(description=description)
-    p.add_argument(
-        "--profile",
-        default="fast",
-        choices=("smoke", "fast", "paper"),
-        help="smoke (seconds, tests), fast (default, minutes on a 2-core CPU), paper",
-    )
+    """The flags every study script takes: the command line's method flags (`options.add_method_flags`,
+    checked by `options.check_method_flags` in `run_options`), --methods and --out; errors are one line."""
+    p = Parser(description=description)
     p.add_argument(
         "--methods",
         default="modal,ensemble,bpinn",
         help="comma list of modal, ensemble, bpinn, or 'all' (default all three)",
     )
-    p.add_argument("--seed", type=int, default=0, help="root seed (default 0)")
     p.add_argument("--out", default="reports/paper", help="output folder (default reports/paper)")
-    p.add_argument("--members", type=int, default=5, help="ensemble size (default 5)")
-    p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
-    p.add_argument(
-        "--noise-prior",
-        dest="noise_prior",
-        default="vague",
-        choices=("vague", "snr"),
-        help="prior on the noise sd (default vague)",
-    )
-    p.add_argument(
-        "--bpinn-variant",
-        dest="bpinn_variant",
-        default="auto",
-        choices=("auto", "last-layer", "full"),
-        help="B-PINN sampler (default auto: full for --profile paper, else last-layer)",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress output")
+    add_method_flags(p)
     return p
 
 
@@ -84,6 +63,7 @@ def levels_of(text: str) -> list[float | None]:
 
 
 def run_options(args, snr_db: float | None = None) -> RunOptions:
+    check_method_flags(args)
     return RunOptions(
         profile=args.profile,
         members=args.members,

@@ -27,15 +27,18 @@ log = logging.getLogger("studies.replay_record")
 
 
 def rerun(record: Path, folder: Path) -> None:
-    """Run the record's command with today's code into `folder`."""
-    from bayespinn.cli import main as cli
+    """Run the record's command with today's code into `folder` (a process of its own, as a user runs it;
+    paths in the command are relative to the repository root, where the records were made)."""
+    import subprocess
 
     man = json.loads((record / "manifest.json").read_text(encoding="utf-8"))
     argv = command_without_out(man["command"])
-    if not argv or argv[0] not in ("run",):
+    if not argv or argv[0] != "run":
         raise InputError("record", str(record), "a record of a `bayespinn run` command")
     log.info("replay: bayespinn %s", " ".join(argv))
-    rc = cli([*argv, "--out", str(folder)])
+    root = Path(__file__).resolve().parents[1]
+    cmd = [sys.executable, "-m", "bayespinn", *argv, "--out", str(folder.resolve())]
+    rc = subprocess.run(cmd, cwd=root).returncode
     if rc != 0:
         raise RuntimeError(f"the record's command exited {rc}")
 

@@ -12,6 +12,7 @@ import pytest
 
 import bayespinn as bp
 from bayespinn.errors import InputError
+from bayespinn.options import RunOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -71,6 +72,10 @@ def test_analyse_writes_no_file_and_matches_run(tmp_path, monkeypatch):
         ({"methods": ("modal", "mcmc")}, "--method"),
         ({"profile": "fastest"}, "profile"),
         ({"truth": {"EI": -1.0}}, "truth"),
+        ({"methods": ("ensemble",), "opts": RunOptions(members=0)}, "members"),
+        ({"opts": RunOptions(profile="smoke", noise_prior="flat")}, "noise_prior"),
+        ({"methods": ("bpinn",), "opts": RunOptions(bpinn_variant="fulll")}, "bpinn_variant"),
+        ({"methods": ("ensemble",), "opts": RunOptions(profile="quick")}, "profile"),
     ],
 )
 def test_analyse_names_the_bad_input(kw, field):
@@ -100,3 +105,21 @@ def test_example_script_runs_with_tiny_settings(tmp_path):
     )
     assert r.returncode == 0, r.stderr[-2000:]
     assert "modal_mcmc: EI" in r.stdout and (tmp_path / "ex" / "summary.json").is_file()
+
+
+@pytest.mark.parametrize(
+    "kw, field",
+    [({"level": 1.5}, "--level"), ({"level": 0.0}, "--level"), ({"replicates": 0}, "--replicates")],
+)
+def test_coverage_names_the_bad_input(kw, field):
+    from bayespinn.uq.coverage import coverage_study
+
+    with pytest.raises(InputError, match=re.escape(field)):
+        coverage_study("modal", bp.resolve("deflection"), 20.0, **kw)
+
+
+def test_a_bad_executor_names_the_field():
+    from bayespinn.executor import Executor
+
+    with pytest.raises(InputError, match="--executor"):
+        Executor("cluster")

@@ -1,0 +1,72 @@
+"""Command-line flags shared by `bayespinn` and the study scripts: one-line errors (`Parser`), the flags
+that choose how the methods run (`add_method_flags`) and their checks (`check_method_flags`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .errors import InputError
+from .options import (
+    BPINN_VARIANTS,
+    EXECUTORS,
+    NOISE_PRIORS,
+    PROFILES,
+    int_at_least,
+    resolve_device,
+)
+
+
+class UsageError(InputError):
+    """A flag-level error found by argparse."""
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: a bad flag raises UsageError (exit 2 where it is caught), no usage dump."""
+
+    def error(self, message: str):
+        raise UsageError("command line", " ".join(sys.argv[1:]), message)
+
+
+def add_method_flags(p: argparse.ArgumentParser) -> None:
+    """The flags that choose how the methods run, declared once for the command line and the study scripts
+    (`check_method_flags` checks their values)."""
+    p.add_argument(
+        "--members", type=int_at_least("--members", 1), default=5, help="ensemble size (default 5)"
+    )
+    p.add_argument(
+        "--profile",
+        default="fast",
+        help="smoke (seconds, tests), fast (default, minutes on a 2-core CPU) or paper",
+    )
+    p.add_argument(
+        "--seed", type=int_at_least("--seed", 0), default=0, help="root seed (default 0)"
+    )
+    p.add_argument("--device", default="auto", help="auto, cpu or cuda (default auto)")
+    p.add_argument(
+        "--noise-prior",
+        dest="noise_prior",
+        default="vague",
+        help="prior on the noise sd: vague (default) or snr",
+    )
+    p.add_argument(
+        "--bpinn-variant",
+        dest="bpinn_variant",
+        default="auto",
+        help="B-PINN sampler: last-layer, full (every hidden weight), or auto (default: full for "
+        "--profile paper, else last-layer)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def check_method_flags(args) -> None:
+    """InputError naming the flag for a bad profile, B-PINN variant, noise prior, executor or device."""
+    if getattr(args, "profile", "fast") not in PROFILES:
+        raise InputError("--profile", args.profile, "smoke, fast or paper")
+    if getattr(args, "bpinn_variant", "auto") not in BPINN_VARIANTS:
+        raise InputError("--bpinn-variant", args.bpinn_variant, "auto, last-layer or full")
+    if getattr(args, "noise_prior", "vague") not in NOISE_PRIORS:
+        raise InputError("--noise-prior", args.noise_prior, "vague or snr")
+    if getattr(args, "executor", "local") not in EXECUTORS:
+        raise InputError("--executor", args.executor, "local or ray")
+    resolve_device(getattr(args, "device", "auto"))
