@@ -165,14 +165,22 @@ def main(argv: list[str] | None = None) -> int:
         return int(exc.code or 0)
     quiet = getattr(args, "quiet", False)
     _setup_logging(quiet)
+    from .stopping import stop_cleanly
+
     try:
-        return int(_commands()[args.command](args) or 0)
+        with (
+            stop_cleanly()
+        ):  # SIGINT/SIGTERM: workers killed, nothing half-written, studies resumable
+            return int(_commands()[args.command](args) or 0)
     except InputError as exc:
         print(f"bayespinn: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("bayespinn: interrupted", file=sys.stderr)
-        return 1
+    except KeyboardInterrupt as exc:
+        print(
+            f"bayespinn: stopped ({exc or 'SIGINT'}); finished work is kept for a resume",
+            file=sys.stderr,
+        )
+        return 130 if str(exc) != "SIGTERM" else 143
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, exit 1
         log.debug("failure", exc_info=True)
         print(f"bayespinn: failed: {exc.__class__.__name__}: {exc}", file=sys.stderr)

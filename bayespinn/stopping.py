@@ -1,0 +1,48 @@
+"""Stopping cleanly: SIGINT (Ctrl-C) or SIGTERM (what a scheduler or `docker stop` sends) to the main
+process stops every worker process at once and unwinds the main process as a KeyboardInterrupt, so that
+run folders are not half-written (`pipeline.staged_output` removes its staging folder) and a coverage
+study or sweep keeps its finished tasks for a resume (their checkpoints are written by the main process).
+
+Workers hold nothing that must be cleaned up (their results travel back to the main process), so they are
+killed (SIGKILL) rather than asked: a polite signal would only reach the task they are running, which the
+pool would report and then carry on with the next one.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+import threading
+from contextlib import contextmanager
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def stop_workers() -> int:
+    """Kill this process's worker processes (multiprocessing children); returns how many."""
+    children = multiprocessing.active_children()
+    for p in children:
+        p.kill()
+    for p in children:
+        p.join(timeout=2)
+    return len(children)
+
+
+def _stop(signum, frame):  # noqa: ARG001 - signal handler signature
+    stop_workers()
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+@contextmanager
+def stop_cleanly():
+    """Within this block (main thread only), SIGINT and SIGTERM kill the worker processes and raise
+    KeyboardInterrupt in the main process. Elsewhere it does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    old = {s: signal.signal(s, _stop) for s in SIGNALS}
+    try:
+        yield
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)

@@ -1,0 +1,92 @@
+"""SIGINT and SIGTERM to a real run stop every worker within 5 s and leave no half-written output."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(
+    not Path("/proc").is_dir(), reason="reads the process table in /proc"
+)
+
+
+def children(pid: int) -> set[int]:
+    """All descendants of pid (from /proc)."""
+    parent = {}
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                stat = (d / "stat").read_text()
+            except OSError:
+                continue
+            parent[int(d.name)] = int(stat.rsplit(")", 1)[1].split()[1])
+    out, todo = set(), [pid]
+    while todo:
+        p = todo.pop()
+        kids = [c for c, pp in parent.items() if pp == p]
+        out.update(kids)
+        todo.extend(kids)
+    return out
+
+
+def alive(pids) -> set[int]:
+    out = set()
+    for p in pids:
+        try:
+            state = Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state != "Z":
+            out.add(p)
+    return out
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_stops_every_worker_and_leaves_nothing(tmp_path, sig):
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "bayespinn", "run", "--snr", "20", "--method", "ensemble"]
+    cmd += ["--profile", "smoke", "--members", "4", "--workers", "2", "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        workers: set[int] = set()
+        while time.monotonic() < deadline and len(workers) < 2:  # the pool's workers are training
+            time.sleep(0.2)
+            workers = alive(children(proc.pid))
+        assert len(workers) >= 2, "the run never started its worker processes"
+        time.sleep(1.0)
+        t0 = time.monotonic()
+        proc.send_signal(sig)
+        rc = proc.wait(timeout=30)
+        left = alive(workers | children(proc.pid))
+        waited = time.monotonic() - t0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert waited < 5.0 and not left, (waited, left)
+    assert rc == (143 if sig == signal.SIGTERM else 130), proc.stderr.read()
+    assert not out.exists(), "a stopped run left a (half-written) output folder"
+
+
+def test_the_handler_kills_workers_in_process(tmp_path):
+    """The same from Python: inside `stop_cleanly`, the signal becomes KeyboardInterrupt after the pool's
+    workers are gone."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from bayespinn.stopping import stop_cleanly
+
+    with pytest.raises(KeyboardInterrupt), stop_cleanly():
+        with ProcessPoolExecutor(2) as pool:
+            futs = [pool.submit(time.sleep, 30) for _ in range(2)]
+            time.sleep(0.5)
+            pids = set(children(os.getpid()))
+            os.kill(os.getpid(), signal.SIGTERM)
+            for f in futs:
+                f.result()
+    assert not alive(pids)
