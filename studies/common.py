@@ -90,12 +90,19 @@ def setup_logging(quiet: bool) -> None:
 
 
 def entry(main: Callable[[list[str] | None], int]) -> None:
-    """Run main() as a script: exit 2 with one line for bad input, else main's code."""
+    """Run main() as a script: exit 2 with one line for bad input, else main's code. SIGINT and SIGTERM stop
+    the worker processes at once (`bayespinn.stopping`); finished replicates stay in their checkpoint."""
+    from bayespinn.stopping import stop_cleanly
+
     try:
-        code = main(None)
+        with stop_cleanly():
+            code = main(None)
     except InputError as exc:
         print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
         code = 2
+    except KeyboardInterrupt as exc:
+        print(f"{Path(sys.argv[0]).name}: stopped ({exc or 'SIGINT'})", file=sys.stderr)
+        code = 130 if str(exc) != "SIGTERM" else 143
     sys.exit(code)
 
 
