@@ -46,10 +46,11 @@ def bench_modal(
 
 
 def bench(device: str = "cpu", progress: bool = True) -> dict:
-    """All sections: derivatives (Taylor vs nested autograd), ensemble (one after another vs batched vs parallel processes), modal."""
+    """All sections: derivatives (Taylor vs nested autograd), ensemble (one after another vs batched vs parallel
+    processes), many networks trained as one, modal."""
     import torch
 
-    from .pinn.bench import bench_derivatives, bench_ensemble
+    from .pinn.bench import bench_derivatives, bench_ensemble, bench_many_networks
 
     threads = torch.get_num_threads()
     res = {"schema": "bayespinn.bench/1", "device": device, "threads": threads}
@@ -57,6 +58,8 @@ def bench(device: str = "cpu", progress: bool = True) -> dict:
     res["derivatives"] = bench_derivatives(device=device)
     log.info("bench: ensemble (one after another vs batched vs parallel processes) ...")
     res["ensemble"] = bench_ensemble(device=device)
+    log.info("bench: many networks trained as one (1, 8, 64, 256) ...")
+    res["many_networks"] = bench_many_networks(device=device)
     log.info("bench: modal likelihood ...")
     res["modal"] = bench_modal()
     return res

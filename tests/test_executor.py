@@ -235,6 +235,16 @@ def test_bench_ensemble_reports_what_the_toolkit_uses():
     assert r["batched_speedup"] == r["sequential_ms_per_epoch"] / r["batched_ms_per_epoch"]
 
 
+def test_bench_many_networks_counts_networks_times_steps():
+    from bayespinn.pinn.bench import bench_many_networks
+
+    r = bench_many_networks(counts=(1, 3), points=30, width=8, depth=2, seconds=0.0, min_steps=2)
+    one, three = r["rows"]
+    assert one["networks"] == 1 and three["networks"] == 3 and one["ratio_vs_one"] == 1.0
+    assert three["networks_steps_per_s"] == pytest.approx(3 * 2 / (2 * three["ms_per_step"] / 1e3))
+    assert three["ratio_vs_one"] == three["networks_steps_per_s"] / one["networks_steps_per_s"]
+
+
 def test_bad_executor_is_input_error():
     from bayespinn.errors import InputError
 
