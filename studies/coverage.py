@@ -177,7 +177,11 @@ def blocks(doc: dict) -> list:
             "index, so two SNR rows are two experiments; 'paired' rows (older seeding) reused the same sample "
             "points and standard-normal draws at every SNR, so such rows are one experiment seen twice and "
             "must not be pooled. Code: whether the replicates were computed by today's code (the code "
-            "version of the method, the simulator and the coverage driver, `bayespinn.codeversion`)."
+            "version of the method, the simulator and the coverage driver, `bayespinn.codeversion`); "
+            "'replayed' means they were computed by code that has changed since in ways that do not move "
+            "the numbers (a refactor): today's code re-ran the study's first replicates and reproduced "
+            "every field of their records bit for bit (`python studies/coverage.py --replay N`, certificate "
+            "`coverage/<method>-snr<S>.replay.json`)."
         ),
         *alerts,
         table(
