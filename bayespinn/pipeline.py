@@ -288,10 +288,9 @@ def write_run(result: RunResult, out: str | Path, *, report: bool = True) -> Pat
     out = Path(out)
     with staged_output(out) as stage:
         result.data.to_csv(stage / "data.csv")
+        seed = result.summary.get("seed") or 0
         for k, p in result.posteriors.items():
-            p.to_netcdf(
-                stage / f"posterior_{k}.nc", data=result.data, seed=result.summary.get("seed") or 0
-            )
+            _write_posterior(stage / f"posterior_{k}.nc", k, p, result.data, seed)
         if report:
             from .report import write_reports
 
@@ -299,6 +298,24 @@ def write_run(result: RunResult, out: str | Path, *, report: bool = True) -> Pat
         _write_json(stage / "manifest.json", result.manifest)
         _write_json(stage / "summary.json", result.summary)
     return out
+
+
+def _write_posterior(path: Path, key: str, post: Posterior, data: Measurements, seed) -> None:
+    """posterior_<key>.nc with every group; when the method's predictor fails at the data points (e.g. a
+    degenerate posterior whose output-weight covariance is not positive definite), the file is written
+    without `posterior_predictive` and a warning says so, rather than losing the run."""
+    try:
+        post.to_netcdf(path, data=data, seed=seed)
+    except Exception as exc:  # noqa: BLE001 - the draws must not be lost for a predictive check
+        log.warning(
+            "warning: [%s] posterior predictive at the data points failed (%s: %s); %s has no "
+            "posterior_predictive group",
+            key,
+            type(exc).__name__,
+            exc,
+            path.name,
+        )
+        replace(post, predictor=None).to_netcdf(path, data=data, seed=seed)
 
 
 def run(

@@ -123,3 +123,23 @@ def test_a_bad_executor_names_the_field():
 
     with pytest.raises(InputError, match="--executor"):
         Executor("cluster")
+
+
+def test_a_failing_predictor_does_not_lose_the_posterior_file(tmp_path, caplog):
+    """A degenerate posterior whose predictive draws fail (a Cholesky of a covariance that is not positive
+    definite) still gets its posterior file, without the posterior_predictive group, and a warning."""
+    import arviz as az
+    import numpy as np
+
+    cfg = bp.resolve("deflection")
+    data = bp.simulate(cfg, snr_db=20, seed=3)
+    res = bp.analyse(data, cfg, methods=("modal",), seed=0, profile="smoke", snr_db=20)
+
+    def broken(*args, **kwargs):
+        raise np.linalg.LinAlgError("not positive definite")
+
+    res.posteriors["modal_mcmc"].predictor = broken
+    out = bp.write_run(res, tmp_path / "run", report=False)
+    idata = az.from_netcdf(out / "posterior_modal_mcmc.nc")
+    assert "posterior_predictive" not in idata.groups() and "observed_data" in idata.groups()
+    assert "posterior predictive at the data points failed" in caplog.text
