@@ -47,6 +47,7 @@ def alive(pids) -> set[int]:
     return out
 
 
+@pytest.mark.slow  # two real runs (~12 s); the in-process test below covers the handler in the default run
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_a_signal_stops_every_worker_and_leaves_nothing(tmp_path, sig):
     out = tmp_path / "run"
