@@ -252,8 +252,28 @@ def analyse(
         # the code each method's numbers come from (`codeversion`): a record is stale once these change
         "code_versions": {m.key: method_version(m.name) for m in chosen},
         "timings_s": timings,
+        "time_breakdown_s": time_breakdown(posts),
     }
     return RunResult(data, truth, posts, summary, manifest, cfg)
+
+
+def time_breakdown(posteriors: dict[str, Posterior]) -> dict:
+    """Where each method's wall time went [s], from what the methods record: the PINN training
+    (`fit_runtime_s`: the B-PINN's one warm-start fit; the ensemble's member fits summed over its worker
+    processes, so it can exceed the wall time) and the rest (the B-PINN's last-layer model and NUTS, the
+    ensemble's pooling; everything for the modal reference)."""
+    out = {}
+    for k, p in posteriors.items():
+        fit = (p.diagnostics or {}).get("fit_runtime_s")
+        entry = {"wall": float(p.runtime_s)}
+        if isinstance(fit, int | float) and fit >= 0:
+            if k == "ensemble" or fit > p.runtime_s:
+                entry["training_summed_over_workers"] = float(fit)
+            else:
+                entry["training"] = float(fit)
+                entry["rest"] = float(p.runtime_s - fit)
+        out[k] = entry
+    return out
 
 
 def _methods(methods, opts: RunOptions) -> list:

@@ -143,3 +143,16 @@ def test_a_failing_predictor_does_not_lose_the_posterior_file(tmp_path, caplog):
     idata = az.from_netcdf(out / "posterior_modal_mcmc.nc")
     assert "posterior_predictive" not in idata.groups() and "observed_data" in idata.groups()
     assert "posterior predictive at the data points failed" in caplog.text
+
+
+def test_the_manifest_says_where_the_time_went():
+    from bayespinn.pipeline import time_breakdown
+    from bayespinn.uq.posterior import Posterior
+
+    post = Posterior("bpinn", [[1.0, 2.0]], [[1.0, 1.0]], diagnostics={"fit_runtime_s": 3.0})
+    post.runtime_s = 5.0
+    ens = Posterior("ensemble", [[1.0, 2.0]], [[1.0, 1.0]], diagnostics={"fit_runtime_s": 8.0})
+    ens.runtime_s = 5.0
+    out = time_breakdown({"bpinn": post, "ensemble": ens})
+    assert out["bpinn"] == {"wall": 5.0, "training": 3.0, "rest": 2.0}
+    assert out["ensemble"] == {"wall": 5.0, "training_summed_over_workers": 8.0}
