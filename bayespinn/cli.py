@@ -180,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
             f"bayespinn: stopped ({exc or 'SIGINT'}); finished work is kept for a resume",
             file=sys.stderr,
         )
-        return 130 if str(exc) != "SIGTERM" else 143
+        return 1  # the contract: 1 for any failure other than bad input
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, exit 1
         log.debug("failure", exc_info=True)
         print(f"bayespinn: failed: {exc.__class__.__name__}: {exc}", file=sys.stderr)

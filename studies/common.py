@@ -102,7 +102,7 @@ def entry(main: Callable[[list[str] | None], int]) -> None:
         code = 2
     except KeyboardInterrupt as exc:
         print(f"{Path(sys.argv[0]).name}: stopped ({exc or 'SIGINT'})", file=sys.stderr)
-        code = 130 if str(exc) != "SIGTERM" else 143
+        code = 1
     sys.exit(code)
 
 

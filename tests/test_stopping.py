@@ -71,7 +71,7 @@ def test_a_signal_stops_every_worker_and_leaves_nothing(tmp_path, sig):
         if proc.poll() is None:
             proc.kill()
     assert waited < 5.0 and not left, (waited, left)
-    assert rc == (143 if sig == signal.SIGTERM else 130), proc.stderr.read()
+    assert rc == 1, proc.stderr.read()  # the contract: 1 for any failure other than bad input
     assert not out.exists(), "a stopped run left a (half-written) output folder"
 
 
