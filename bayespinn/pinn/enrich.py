@@ -18,6 +18,27 @@ network learns everything else: the dynamics, the initial conditions, any depart
 
 Derivatives are exact: d/dxi and d/dtau of the sines shift their phase by pi/2.
 
+**The forced response, not only the static one.** Under a moving load mode n is driven at the frequency
+Omega_n = n pi v / L at which the axle crosses its half-waves, and its particular (forced) response is the
+static one amplified by D_n = 1 / (1 - r_n^2), r_n = Omega_n / omega_n = alpha / n at EI_ref's frequencies
+(alpha = v / (2 f1 L); with damping zeta a phase too). The static shape alone leaves that amplification to
+the enrichment's free coefficient, and the data cannot tell an amplified first mode from a softer girder:
+fitted to the exact response with the free vibrations of the first three modes, the static enrichment's
+coefficient comes out 1 / (1 - alpha^2) (1.004 at alpha = 0.064, 1.042 at 0.2; `tests/test_enrich.py`),
+and the PDE then turns that coefficient into an EI low by the same factor, a bias of several posterior sds
+on fast crossings. With `frequency` given, the enrichment is the forced response at the current EI:
+
+    E(xi, tau; EI) = E_static + sum_{n <= K_a} (D_n(EI) - 1) E_n + (EI_ref / EI) sum_{n > K_a} r_n^2 E_n
+
+(D_n with the damping's phase; r_n at EI_ref), E_n the n-th term of the static series. It solves
+EI E_xixixixi / 48 + inertia E_tautau = f / q at that EI (the particular solution of every mode: the free
+vibrations carry the homogeneous rest), exactly for the first K_a modes and to O(r_n^4) for the rest, and
+the fit's coefficient is EI_ref / EI whatever the speed. K_a (`amplified_modes`) follows the bridge: the
+smallest K with (r_1 / (K + 1))^2 (K + 1)^-4 below AMPLIFIED_TOL (with EI down to EI_ref / 4), so the
+first-order tail errs by less than that share of the first mode's static deflection: 5 modes at the Exeter
+girder's alpha, 10 at 0.2. The parts that depend on EI are kept per point set like the static jet; EI
+enters detached, like the free vibrations' frequency: the amplification follows EI between steps.
+
 E depends on the points alone, and a series of ~300 sines per point cost a tenth of a training step, so
 each enrichment keeps the jets of the last few point sets it was asked for (`_JetCache`): the data points
 never change during a fit and the collocation points only every `resample_every` steps.
@@ -36,6 +57,12 @@ from .taylor import Jet
 
 #: truncation: the sine series stops where g_n < this (its fourth derivative then converges to it)
 SERIES_TOL = 1e-9
+#: modes whose dynamic amplification is left out contribute less than this share of mode 1's static part
+AMPLIFIED_TOL = 1e-7
+#: EI may fall this far below EI_ref (r_n grows as EI falls) before K_a would need one more mode
+AMPLIFIED_EI_MARGIN = 4.0
+#: r_n^2 is clamped below this, a guard for EIs far off in a diverging fit (a bridge has alpha < 0.5)
+MAX_R2 = 0.81
 
 
 def n_terms(beta_rel: float, tol: float = SERIES_TOL) -> int:
@@ -92,49 +119,144 @@ class _JetCache:
 class StaticEnrichment:
     """The axles in non-dimensional form (see module docstring).
 
-    loads : (J,) axle loads / P; delays : (J,) entry times / T; speed : v T / L; beta_rel : beta / L.
+    loads : (J,) axle loads / P; delays : (J,) entry times / T; speed : v T / L; beta_rel : beta / L;
+    frequency : None (the quasi-static enrichment), or W_1 = omega_1(EI_ref) T [rad]: the forced response
+    at the current EI (module docstring); damping : zeta, the modal damping ratio (with `frequency`).
     """
 
     loads: tuple[float, ...]
     delays: tuple[float, ...]
     speed: float
     beta_rel: float
+    frequency: float | None = None
+    damping: float = 0.0
     _cache: _JetCache = field(default_factory=_JetCache, init=False, repr=False, compare=False)
+    _modes: _JetCache = field(default_factory=_JetCache, init=False, repr=False, compare=False)
 
     n_features = 1
 
-    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor | None = None) -> Jet:
-        """Jet of E at points (M, N): components (M, N, 1) (``log_ei`` is not used); the same Jet object
-        again for the same point tensors (its components are never modified in place)."""
-        return self._cache.get(xi, tau, kx, kt, lambda: self._jet(xi, tau, kx, kt))
+    @property
+    def amplified_modes(self) -> int:
+        """K_a: the modes whose forced amplification the enrichment carries (0: quasi-static)."""
+        if self.frequency is None:
+            return 0
+        r1_sq = AMPLIFIED_EI_MARGIN * (math.pi * self.speed / self.frequency) ** 2
+        return max(1, math.ceil((r1_sq / AMPLIFIED_TOL) ** (1.0 / 6.0)) - 1)
 
-    def _jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet:
-        n = n_terms(self.beta_rel)
-        k = math.pi * torch.arange(1, n + 1, dtype=xi.dtype, device=xi.device)  # (n,)
+    def amplification(self, log_ei: Tensor) -> tuple[Tensor, Tensor | None]:
+        """(D_n - 1, its quadrature part or None without damping) for n = 1..K_a at log(EI / EI_ref)
+        (M,): the forced response of mode n is (1 + a_n) sin(Omega_n t) + b_n cos(Omega_n t) times its
+        static amplitude; shapes (M, K_a)."""
+        K = self.amplified_modes
+        n = torch.arange(1, K + 1, dtype=log_ei.dtype, device=log_ei.device)
+        r = self._r1() / (n * torch.exp(0.5 * log_ei).unsqueeze(-1))  # Omega_n / omega_n
+        r2 = (r * r).clamp(max=MAX_R2)
+        z = self.damping
+        if z == 0.0:
+            return 1.0 / (1.0 - r2) - 1.0, None
+        den = (1.0 - r2) ** 2 + (2.0 * z) ** 2 * r2
+        return (1.0 - r2) / den - 1.0, -2.0 * z * r2.sqrt() / den
+
+    def _r1(self) -> float:
+        """r_1 at EI_ref: Omega_1 / omega_1 = pi (v T / L) / W_1 (alpha at EI_ref)."""
+        return math.pi * self.speed / self.frequency
+
+    def jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor | None = None) -> Jet:
+        """Jet of E at points (M, N): components (M, N, 1). Quasi-static (no `frequency`, or no
+        ``log_ei``): the same Jet object again for the same point tensors (its components are never
+        modified in place). Forced: the static jet plus the amplified share at ``log_ei`` (M,), detached:
+        modes 1..K_a exactly, the rest to first order in r_n^2 (D_n - 1 = r_n^2 / theta + O(r_n^4),
+        theta = EI / EI_ref), so that the PDE residual of every mode is solved, not only the deflection."""
+        static = self._cache.get(xi, tau, kx, kt, lambda: self._jet(xi, tau, kx, kt))
+        if self.frequency is None or log_ei is None:
+            return static
+        K = self.amplified_modes
+        parts = self._modes.get(xi, tau, kx, kt, lambda: self._mode_jets(xi, tau, kx, kt, K))
+        lei = log_ei.detach().to(xi.dtype)
+        a, b = self.amplification(lei)
+        theta = torch.exp(lei).view(-1, 1, 1)
+        # (jet, its weight over the last axis): modes 1..K_a, then the tails
+        weighted = [(parts[0], a.unsqueeze(1)), (parts[2], 1.0 / theta)]
+        if b is not None:
+            weighted += [(parts[1], b.unsqueeze(1)), (parts[3], 1.0 / theta.sqrt())]
+
+        def add(base: Tensor, *cs: Tensor) -> Tensor:
+            out = base
+            for c, (_, w) in zip(cs, weighted, strict=True):
+                out = out + (c * w).sum(-1, keepdim=True)
+            return out
+
+        jets = [j for j, _ in weighted]
+        return Jet(
+            add(static.value, *(j.value for j in jets)),
+            tuple(add(*z) for z in zip(static.x, *(j.x for j in jets), strict=True)),
+            tuple(add(*z) for z in zip(static.t, *(j.t for j in jets), strict=True)),
+        )
+
+    def _series(
+        self,
+        xi: Tensor,
+        tau: Tensor,
+        kx: int,
+        kt: int,
+        modes: range,
+        *,
+        total: bool,
+        phase: int = 0,
+        weight=None,
+    ) -> Jet:
+        """Jet of the terms `modes` of the static series, summed (components (M, N, 1)) or per mode
+        ((M, N, len(modes))); phase 1 puts cos(k a) in place of sin(k a) (the damped response's
+        quadrature); weight(n) (a tensor over the modes) multiplies each term."""
+        n = torch.arange(modes.start, modes.stop, dtype=xi.dtype, device=xi.device)
+        k = math.pi * n
         g = 2.0 * torch.exp(-((k * self.beta_rel) ** 2) / 4.0) / k**4 * 48.0
+        if weight is not None:
+            g = g * weight(n)
         kxi = xi.unsqueeze(-1) * k  # (M, N, n)
         sx, cx = torch.sin(kxi), torch.cos(kxi)
         # d^m/dxi^m sin(k xi) = k^m sin(k xi + m pi / 2): (sin, cos, -sin, -cos)
         x_parts = [sx, cx, -sx, -cx]
-        # time factor per axle: A_m(tau) = sum_j p_j live_j d^m/dtau^m sin(k a_j), m = 0..kt
+        # time factor per axle: A_m(tau) = sum_j p_j live_j d^m/dtau^m sin(k a_j + phase pi / 2)
         A = [torch.zeros_like(kxi) for _ in range(kt + 1)]
         for p, d in zip(self.loads, self.delays, strict=True):
             a = self.speed * (tau - d)
             live = ((a >= 0.0) & (a <= 1.0)).to(xi.dtype).unsqueeze(-1)
             ka = a.unsqueeze(-1) * k
             sa, ca = torch.sin(ka), torch.cos(ka)
-            t_parts = [sa, ca, -sa]
+            t_parts = [sa, ca, -sa, -ca][phase:]
             for m in range(kt + 1):
                 A[m] = A[m] + (p * live) * (k * self.speed) ** m * t_parts[m]
 
         def comp(mx: int, mt: int) -> Tensor:
-            return ((g * k**mx) * x_parts[mx % 4] * A[mt]).sum(-1, keepdim=True)
+            c = (g * k**mx) * x_parts[mx % 4] * A[mt]
+            return c.sum(-1, keepdim=True) if total else c
 
         return Jet(
             comp(0, 0),
             tuple(comp(m, 0) for m in range(1, kx + 1)),
             tuple(comp(0, m) for m in range(1, kt + 1)),
         )
+
+    def _jet(self, xi: Tensor, tau: Tensor, kx: int, kt: int) -> Jet:
+        return self._series(xi, tau, kx, kt, range(1, n_terms(self.beta_rel) + 1), total=True)
+
+    def _mode_jets(self, xi: Tensor, tau: Tensor, kx: int, kt: int, K: int) -> tuple:
+        """(modes 1..K per mode, their quadrature or None, the tail sum_{n > K} r_n^2 E_n at EI_ref, its
+        quadrature -2 zeta r_n E_n^cos or None): the parts of the forced response that depend on EI."""
+        head = range(1, K + 1)
+        tail = range(K + 1, max(n_terms(self.beta_rel), K) + 1)
+        r1 = self._r1()
+        sin_part = self._series(xi, tau, kx, kt, head, total=False)
+        tail_sin = self._series(xi, tau, kx, kt, tail, total=True, weight=lambda n: (r1 / n) ** 2)
+        if not self.damping:
+            return sin_part, None, tail_sin, None
+        z = self.damping
+        cos_part = self._series(xi, tau, kx, kt, head, total=False, phase=1)
+        tail_cos = self._series(
+            xi, tau, kx, kt, tail, total=True, phase=1, weight=lambda n: -2.0 * z * r1 / n
+        )
+        return sin_part, cos_part, tail_sin, tail_cos
 
 
 @dataclass(frozen=True)

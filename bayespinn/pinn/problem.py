@@ -142,14 +142,19 @@ class Problem:
         """The Gaussian width [m]: `beta` if set, else beta_rel L."""
         return float(self.beta) if self.beta is not None else beta_rel * self.beam.length
 
-    def enrichment(self, beta_rel: float = DEFAULT_BETA_REL) -> StaticEnrichment:
-        """The axles as the non-dimensional static enrichment of the output layer (see `enrich`)."""
+    def enrichment(
+        self, beta_rel: float = DEFAULT_BETA_REL, forced: bool = False
+    ) -> StaticEnrichment:
+        """The axles as the non-dimensional enrichment of the output layer (see `enrich`): the quasi-static
+        deflection of the loads, or with ``forced`` their forced moving-load response at the current EI."""
         sc = self.scales
         return StaticEnrichment(
             loads=tuple(float(p) for p in self.vehicle.loads / sc.P),
             delays=tuple(float(d) for d in self.vehicle.delays / sc.T),
             speed=float(self.vehicle.speed * sc.T / sc.L),
             beta_rel=float(self.beta_for(beta_rel) / sc.L),
+            frequency=sc.time_frequency if forced else None,
+            damping=float(self.beam.damping_ratio) if forced else 0.0,
         )
 
     def free_vibration(self, modes: int) -> FreeVibration:

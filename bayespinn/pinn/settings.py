@@ -61,6 +61,10 @@ class TrainSettings:
         vibration of mode 1 is representable; off in the paper profile
     enrich : static enrichment of the output layer: one more basis function, the quasi-static deflection
         of the Gaussian loads, with a free coefficient (`enrich`); off in the paper profile
+    enrich_forced : the enrichment is the loads' forced moving-load response at the current EI (each mode's
+        static part amplified by 1 / (1 - (alpha / n)^2)), not their quasi-static deflection: without it
+        the enrichment's coefficient mistakes the first mode's amplification for flexibility and EI comes
+        out low by about alpha^2 (`enrich` module docstring)
     free_modes : number of modes K whose free vibrations, started at every axle entry and exit, are output
         basis functions (`enrich.FreeVibration`; 0: none; off in the paper profile)
     engine : 'taylor' (default), 'taylor-unfused' or 'autograd' (nested autograd, slow reference)
@@ -103,6 +107,7 @@ class TrainSettings:
     time_features: bool = False
     oscillator: bool = False
     enrich: bool = True
+    enrich_forced: bool = True
     free_modes: int = 3
     engine: str = "taylor"
     compile: str | bool = "auto"

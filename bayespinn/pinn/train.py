@@ -100,7 +100,7 @@ def _build_model(problem: Problem, s: TrainSettings, members: int, generators=No
     osc = problem.scales.time_frequency if s.oscillator else None
     extras = []
     if s.enrich:
-        extras.append(problem.enrichment(s.beta_rel))
+        extras.append(problem.enrichment(s.beta_rel, forced=s.enrich_forced))
     if s.free_modes:
         extras.append(problem.free_vibration(s.free_modes))
     return PINN(
