@@ -58,6 +58,7 @@ class BPINN(Method):
 
     def infer(self, data, config, *, seed):
         from ..uq.priors import NoisePrior
+        from ..uq.shared_fit import ensemble_seed, member_seed
 
         s = self.settings
         return self._sampler()(
@@ -68,6 +69,8 @@ class BPINN(Method):
             device=s.device,
             noise=NoisePrior.build(s.noise_prior, data.value, s.snr_db),
             progress=self.progress,
+            # the deep ensemble's member 0 fit on the same data (`uq.shared_fit`)
+            fit_seed=member_seed(ensemble_seed(seed)),
         )
 
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .. import seeding
 from ..errors import InputError
 from .base import Method, Settings, check_device
 
@@ -35,12 +34,13 @@ class DeepEnsemble(Method):
     def infer(self, data, config, *, seed):
         from ..uq.ensemble import ensemble_posterior
         from ..uq.priors import NoisePrior
+        from ..uq.shared_fit import ensemble_seed
 
         s = self.settings
         return ensemble_posterior(
             data,
             config,
-            seed=seeding.stream(seed, "ensemble"),
+            seed=ensemble_seed(seed),
             members=s.members,
             profile=s.profile,
             device=s.device,

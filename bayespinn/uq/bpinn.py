@@ -80,12 +80,15 @@ def lastlayer_posterior(
     device: str,
     noise: NoisePrior,
     progress: bool = False,
+    fit_seed=None,
 ) -> Posterior:
     """Fit a PINN, then sample the last-layer B-PINN posterior of (EI, sigma) with NUTS."""
     t0 = time.perf_counter()
     if len(data) == 0:
         return no_data(cfg, seed, t0)
-    res, problem, settings = warm_start_fit(data, cfg, seed, profile, device, progress)
+    res, problem, settings, warm = warm_start_fit(
+        data, cfg, seed, profile, device, progress, fit_seed
+    )
     ei_prior = EIPrior.from_spec(cfg.prior)
     shift = log_shift(res, problem)
     with torch_threads(1):  # tiny linear algebra (see `threads`)
@@ -103,6 +106,7 @@ def lastlayer_posterior(
         variant="last-layer",
         name=VARIANT,
         t0=t0,
+        warm_start=warm,
     )
 
 

@@ -71,22 +71,37 @@ class LastLayerPotential:
 
 
 def warm_start_fit(
-    data: Measurements, cfg: Config, seed, profile: str, device: str, progress: bool
+    data: Measurements, cfg: Config, seed, profile: str, device: str, progress: bool, fit_seed=None
 ):
-    """The deterministic PINN fit both variants start from: (fit result, problem, training settings)."""
+    """The deterministic PINN fit both variants start from: (fit result, problem, training settings,
+    where it came from). On a CPU it is the deep ensemble's member 0 of its first phase (`shared_fit`):
+    taken from the ensemble when it ran on these data in this process, else computed the same way.
+    ``fit_seed`` is that fit's seed (`shared_fit.member_seed`); None: the B-PINN's own stream "init"."""
     from ..pinn import Problem, TrainSettings, fit
+    from . import shared_fit
 
     settings = TrainSettings.for_profile(profile)
     problem = Problem.from_config(cfg, data)
-    log.info("[bpinn] deterministic warm-start fit (%s profile)", profile)
-    res = fit(
-        problem,
-        settings,
-        seed=seeding.stream(seed, "init"),
-        device=device,
-        quiet=not progress,
-    )
-    return res, problem, settings
+    if fit_seed is None:
+        fit_seed = seeding.stream(seed, "init")
+    if str(device).startswith("cuda") or (str(device) == "auto" and torch.cuda.is_available()):
+        log.info("[bpinn] deterministic warm-start fit on the GPU (%s profile)", profile)
+        res = fit(problem, settings, seed=fit_seed, members=1, device=device, quiet=not progress)
+        return res, problem, settings, "own fit (GPU)"
+    k = shared_fit.key(problem, settings, fit_seed, 0)
+    res = shared_fit.recall(k)
+    if res is not None:
+        log.info("[bpinn] warm start: the deep ensemble's member 0 fit on the same data (shared)")
+        return res, problem, settings, "shared with the deep ensemble (its member 0)"
+    log.info("[bpinn] deterministic warm-start fit (%s profile, one thread)", profile)
+    res = shared_fit.member_fit(problem, settings, fit_seed, 0, quiet=not progress)
+    shared_fit.remember(k, res)
+    return res, problem, settings, "own fit (the deep ensemble's member 0, computed here)"
+
+
+def fit_ei(res) -> float:
+    """The fit's EI [N m^2] (a one-member fit holds it as an array of one)."""
+    return float(np.ravel(res.EI)[0])
 
 
 def no_data(cfg: Config, seed, t0: float) -> Posterior:
@@ -142,6 +157,7 @@ def assemble(
     variant: str,
     name: str,
     t0: float,
+    warm_start: str = "own fit",
 ) -> Posterior:
     """The B-PINN posterior from z draws (chain, draw, 2) of (log theta, log sigma): R-hat/ESS, the sampler's
     problems (which decide `converged`), identifiability and, for the last-layer variant, how far the
@@ -156,10 +172,14 @@ def assemble(
         warnings.warn(msg, RuntimeWarning, stacklevel=2)
         diag["problems"] = trouble
     ident = identified(log_ei.ravel(), ei_prior)
+    shared = warm_start.startswith("shared")
     diag.update(
         converged=converged,
-        fit_EI=float(res.EI),
-        fit_runtime_s=res.runtime_s,
+        fit_EI=fit_ei(res),
+        # the training this method spent itself (none when it shared the ensemble's fit)
+        fit_runtime_s=0.0 if shared else res.runtime_s,
+        warm_start=warm_start,
+        warm_start_fit_s=res.runtime_s,
         beta_factor=res.beta_factor,
     )
     info = {"variant": name, "identified": ident}
@@ -167,12 +187,12 @@ def assemble(
         info["note"] = "EI is not identified by these data"
     if variant == "last-layer":
         # self-check: the last-layer posterior linearises around the fit; it must stay near it
-        moved = abs(float(log_ei.mean()) - math.log(res.EI)) / max(float(log_ei.std()), 1e-12)
+        moved = abs(float(log_ei.mean()) - math.log(fit_ei(res))) / max(float(log_ei.std()), 1e-12)
         diag["moved_from_fit_sd"] = moved
         if moved > MAX_MOVE_SD:
             msg = (
                 f"the last-layer posterior (EI mean {float(EI.mean()):.4g} N m^2) lies {moved:.1f} posterior sd "
-                f"from the PINN fit it is built on ({float(res.EI):.4g} N m^2): the network has not learnt the "
+                f"from the PINN fit it is built on ({fit_ei(res):.4g} N m^2): the network has not learnt the "
                 "physics well enough for this approximation, so this interval is not trustworthy"
             )
             warnings.warn("B-PINN: " + msg, RuntimeWarning, stacklevel=2)

@@ -245,13 +245,16 @@ def full_posterior(
     device: str,
     noise: NoisePrior,
     progress: bool = False,
+    fit_seed=None,
 ) -> Posterior:
     """Fit a PINN, then sample the full-weight B-PINN posterior (every hidden weight, log EI, log sigma)
     with NUTS, starting from the last-layer model's MAP with the first mode held."""
     t0 = time.perf_counter()
     if len(data) == 0:
         return no_data(cfg, seed, t0)
-    res, problem, settings = warm_start_fit(data, cfg, seed, profile, device, progress)
+    res, problem, settings, warm = warm_start_fit(
+        data, cfg, seed, profile, device, progress, fit_seed
+    )
     ei_prior = EIPrior.from_spec(cfg.prior)
     shift = log_shift(res, problem)
     with torch_threads(1):  # the last-layer MAP it starts from: tiny linear algebra
@@ -270,6 +273,7 @@ def full_posterior(
         variant="full",
         name=FULL_VARIANT,
         t0=t0,
+        warm_start=warm,
     )
 
 

@@ -47,6 +47,8 @@ from ..threads import torch_threads
 from .lastlayer import IDENTIFIED_FRACTION, LastLayer, LastLayerPredictor
 from .posterior import Posterior
 from .priors import EIPrior, NoisePrior, prior_only
+from .shared_fit import key as fit_key
+from .shared_fit import member_fit, member_seed, remember
 
 log = logging.getLogger(__name__)
 
@@ -148,6 +150,7 @@ class _Phase:
     states: list | None  # per-member state dicts (phase 1, the warm start of phase 2; task path)
     state: dict | None  # the batched state (batched path)
     runtime_s: float  # training time, summed over members when they ran as separate tasks
+    fit0: object = None  # phase 1, task path: member 0's FitResult (the B-PINN's warm start)
 
 
 @dataclass(frozen=True)
@@ -211,18 +214,20 @@ def train_member(task: MemberTask) -> dict:
                     float(info["EI_raw"][0]),
                 )
 
-        stream = "init" if t.phase == 1 else "collocation"
-        r = fit(
-            problem,
-            s,
-            seed=seeding.stream(t.seed, stream),
-            members=1,
-            first_member=t.m,
-            device="cpu",
-            quiet=True,
-            init_state=t.init_state,
-            callback=report,
-        )
+        if t.phase == 1:  # the fit the B-PINN shares (`shared_fit`)
+            r = member_fit(problem, s, member_seed(t.seed), t.m, callback=report)
+        else:
+            r = fit(
+                problem,
+                s,
+                seed=seeding.stream(t.seed, "collocation"),
+                members=1,
+                first_member=t.m,
+                device="cpu",
+                quiet=True,
+                init_state=t.init_state,
+                callback=report,
+            )
         base = Problem.from_config(t.cfg, t.data)
         ll = _last_layer(r.model("cpu"), t.m, base, t.data, t.seed, s)
         out = {
@@ -233,6 +238,8 @@ def train_member(task: MemberTask) -> dict:
         }
         if t.phase == 1:
             out["state"] = r.state
+            if t.m == 0:
+                out["fit"] = r
         else:
             out["last_layer"] = ll
     return out
@@ -251,6 +258,7 @@ def _phase_tasks(tasks: list[MemberTask], executor, desc: str, progress: bool) -
         states=[r["state"] for r in res] if "state" in res[0] else None,
         state=None,
         runtime_s=float(sum(r["runtime_s"] for r in res)),
+        fit0=res[0].get("fit"),
     )
 
 
@@ -356,6 +364,8 @@ def ensemble_posterior(
             "ensemble phase 1",
             not quiet,
         )
+    if p1.fit0 is not None:  # the B-PINN on the same data starts from it (`shared_fit`)
+        remember(fit_key(base, settings, member_seed(seed), 0), p1.fit0)
     sigma_hat = float(np.median([g.mode for g in p1.grids]))
     # phase 2: randomise-then-optimise
     rng = np.random.default_rng(seeding.stream(seed, "noise"))
