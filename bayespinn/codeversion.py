@@ -147,3 +147,8 @@ def method_version(method: str, *extra: str) -> str:
             f"no code version for method {method!r}; known: {', '.join(methods.names())}"
         ) from None
     return code_version(*mods, *DATA_MODULES, *extra)
+
+
+def forget() -> None:
+    """Drop this process's memo of module digests, so that the next versions are read from disk afresh."""
+    _module_digest.cache_clear()

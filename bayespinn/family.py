@@ -267,6 +267,16 @@ def criteria(rows: list[dict]) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ running
+def code_versions_on_disk(names) -> dict:
+    """Each method's code version (summary key -> version) from the files on disk now, not from this
+    process's memo of them: a long study compares them bridge by bridge with those it started with."""
+    from . import codeversion
+    from . import methods as registry
+
+    codeversion.forget()
+    return {registry.get(n).key: codeversion.method_version(n) for n in names}
+
+
 def data_seed(seed: int, index: int) -> np.random.SeedSequence:
     """The seed of bridge `index`'s dataset and analysis in a family study with root seed `seed`."""
     return np.random.SeedSequence(
@@ -287,7 +297,6 @@ def run_bridge(
     import time
 
     from . import methods as registry
-    from .codeversion import method_version
     from .data.synthetic import simulate
     from .options import RunOptions
     from .pipeline import analyse
@@ -299,6 +308,8 @@ def run_bridge(
     if ref_name not in names:
         names = [ref_name, *names]
     seq = data_seed(seed, b.index)
+    # the code versions before the run, read from disk afresh: the modules a run imports are those there now
+    versions = code_versions_on_disk(names)
     t0 = time.perf_counter()
     data = simulate(b.cfg, snr_db, seq)
     res = analyse(
@@ -313,5 +324,5 @@ def run_bridge(
         "methods": rows,
         "time_s": wall,
         "time_breakdown_s": res.manifest.get("time_breakdown_s"),
-        "code_versions": {registry.get(n).key: method_version(n) for n in names},
+        "code_versions": versions,
     }

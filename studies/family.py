@@ -157,6 +157,12 @@ def study(args, argv, snr, names) -> dict:
             len(b.cfg.vehicle.axles),
         )
         rec = family.run_bridge(b, snr, methods=names, seed=args.seed, opts=opts)
+        if rec["code_versions"] != fresh:
+            # the files changed on disk while the study ran: this record's label would not say which
+            # code computed it (run long studies from a checkout nobody edits, e.g. a git worktree)
+            raise InputError(
+                "code", rec["code_versions"], f"the code the study started with ({fresh})"
+            )
         have[i] = rec
         doc["records"] = [have[k] for k in sorted(have)]
         c.write_json(path, doc)  # atomic: an interruption loses at most the bridge under way
