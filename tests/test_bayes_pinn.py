@@ -465,3 +465,27 @@ def test_pooled_variance_is_unbiased_when_members_scatter_as_their_laplace_width
         [pool_log_ei(1.5 * s * rng.standard_normal(5), np.full(5, s), 0.5)[3] for _ in range(n)]
     )
     assert abs(wide.mean() / s**2 - 1) > 4 * np.sqrt(0.5) / np.sqrt(n)
+
+
+def test_bpinn_shares_the_ensembles_fit_and_is_the_same_function_of_the_seed():
+    """Run after the ensemble on the same data, the B-PINN takes the ensemble's member 0 fit instead of
+    training its own (issue 25); alone, it computes that very fit itself: the posterior is the same bit for
+    bit, and only the time it spent training differs. A different seed gives a different fit (the control)."""
+    import bayespinn as bp
+    from bayespinn.uq import shared_fit
+
+    cfg = preset()
+    data = simulate(cfg, 20.0, 3)
+    shared_fit.clear()
+    alone = bp.analyse(data, cfg, methods="bpinn", seed=5, profile="smoke").posteriors["bpinn"]
+    shared_fit.clear()
+    both = bp.analyse(data, cfg, methods="ensemble,bpinn", seed=5, profile="smoke")
+    after = both.posteriors["bpinn"]
+    assert alone.diagnostics["warm_start"].startswith("own fit")
+    assert after.diagnostics["warm_start"].startswith("shared")
+    assert np.array_equal(alone.EI, after.EI) and np.array_equal(alone.sigma, after.sigma)
+    assert after.diagnostics["fit_runtime_s"] == 0.0 < alone.diagnostics["fit_runtime_s"]
+    assert both.manifest["time_breakdown_s"]["bpinn"]["training"] == 0.0
+    shared_fit.clear()
+    other = bp.analyse(data, cfg, methods="bpinn", seed=6, profile="smoke").posteriors["bpinn"]
+    assert other.diagnostics["fit_EI"] != alone.diagnostics["fit_EI"]
