@@ -259,6 +259,8 @@ def blocks(page: dict) -> list:
                 2,
             )
         )
+        if s.get("label"):
+            out.append(Paragraph(f"**{s['label'][0].upper()}{s['label'][1:]}.**"))
         crit_rows = []
         for k, cr in s["criteria"].items():
             p = cr["pass"]
