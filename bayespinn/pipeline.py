@@ -215,6 +215,7 @@ def analyse(
             s["ci90"][1],
             p.runtime_s,
         )
+    checks = fit_checks(posts, data, cfg, seed)
     summary = {
         "schema": "bayespinn.summary/1",
         "case": cfg.case,
@@ -224,6 +225,8 @@ def analyse(
         "truth": truth,
         "methods": {k: p.summary(truth) for k, p in posts.items()},
     }
+    for k, fc in checks.items():
+        summary["methods"][k]["fit_check"] = fc
     if snr_db is not None and synthetic:
         summary["realised_snr_db"] = realised_snr(data.value, data.value_true)
     agree = agreement_entries(summary["methods"])
@@ -255,6 +258,33 @@ def analyse(
         "time_breakdown_s": time_breakdown(posts),
     }
     return RunResult(data, truth, posts, summary, manifest, cfg)
+
+
+def fit_checks(posts: dict[str, Posterior], data: Measurements, cfg: Config, seed) -> dict:
+    """Each method's fit check (`uq.fitcheck`) by summary key; a misfit is logged as a warning. A method
+    without a predictor, or too few data, gets none; a check that fails to run costs a warning, not the run."""
+    from .uq import fitcheck
+
+    out = {}
+    duration = max(cfg.duration, float(np.max(data.t))) if len(data) else cfg.duration
+    s = seed if isinstance(seed, int) else 0
+    for k, p in posts.items():
+        try:
+            fc = fitcheck.check(p, data, cfg.beam.length, duration, seed=s)
+        except Exception as exc:  # noqa: BLE001 - a broken predictor must not lose the run
+            log.warning("warning: [%s] the fit check could not run (%s)", k, exc)
+            continue
+        if fc is None:
+            continue
+        out[k] = fc
+        if fc["verdict"] == "misfit":
+            log.warning(
+                "warning: [%s] the data contradict the model (fit check p = %.2g): its intervals assume "
+                "a model that does not explain these data",
+                k,
+                fc["p_value"],
+            )
+    return out
 
 
 def time_breakdown(posteriors: dict[str, Posterior]) -> dict:

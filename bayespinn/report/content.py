@@ -56,8 +56,20 @@ def not_identified(methods: dict) -> list[tuple[str, str]]:
 
 
 def alerts(summary: dict) -> list[Block]:
-    """The statements that go on top: identifiability, unconverged samplers, disagreement."""
+    """The statements that go on top: misfit first, then identifiability, unconverged samplers, disagreement."""
     out: list[Block] = []
+    for key, m in summary["methods"].items():
+        fc = m.get("fit_check") or {}
+        if fc.get("verdict") == "misfit":
+            out.append(
+                Alert(
+                    f"**The data contradict the model** ({name(key)}, fit check p = {fc['p_value']:.2g}): "
+                    "these intervals assume a model the data contradict. The residuals keep structure that "
+                    "a uniform pinned beam under the stated loads with white noise cannot leave "
+                    f"(lag-1 autocorrelation {fc['residual_autocorr']:+.2f}); read EI as conditional on "
+                    "that model, not as a measurement of the girder."
+                )
+            )
     for key, why in not_identified(summary["methods"]):
         out.append(
             Alert(
