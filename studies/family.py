@@ -63,10 +63,6 @@ def fingerprint(args, snr, methods_run: list[str]) -> str:
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
 
 
-def today(method_keys) -> dict:
-    return c.code_versions(method_keys)
-
-
 def load_study(path: Path, key: str) -> dict:
     """The study at path when it is this study (same fingerprint), else a new empty one."""
     if path.is_file():
@@ -102,7 +98,7 @@ def run_time_reference(args, opts, names) -> dict:
         **TIME_REFERENCE,
         "time_s": time.perf_counter() - t0,
         "runtime_s": {k: p.runtime_s for k, p in res.posteriors.items()},
-        "code_versions": today(res.posteriors),
+        "code_versions": c.code_versions(res.posteriors),
     }
 
 
@@ -111,7 +107,7 @@ def study(args, argv, snr, names) -> dict:
     path = Path(args.out) / "family" / f"{args.case}-snr{snr_label(snr)}.json"
     key = fingerprint(args, snr, names)
     doc = load_study(path, key)
-    fresh = today(keys)
+    fresh = c.code_versions(keys)
     have = {
         r["bridge"]["index"]: r
         for r in doc["records"]
@@ -186,7 +182,7 @@ def summarise(doc: dict) -> dict:
     """A study's criteria per PINN method, its freshness and its times."""
     ref = doc["reference"]
     keys = [k for k in doc["methods"] if k != ref]
-    fresh = today(doc["methods"])
+    fresh = c.code_versions(doc["methods"])
     out = {
         k: {
             **family.criteria(
