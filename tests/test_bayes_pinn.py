@@ -208,20 +208,31 @@ def test_last_layer_marginal_is_exact(smoke_fit):
 
 
 def test_first_mode_follows_ei_only_where_the_data_resolve_its_vibration(smoke_fit):
-    """The vibration test (`lastlayer` docstring): at 20 dB the smoke fit's first-mode vibration stands well
-    above the noise and its frequency follows EI; the same features explaining far noisier data (noise 30x)
-    hold it at the fitted EI. Both decisions come from z^2 against the chi^2 threshold."""
-    cfg, data, problem, res = smoke_fit
-    model = res.model()
-    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
-    assert ll.first_mode_varies and ll.vibration_z2 > ll.vibration_threshold and ll.nv > 0
+    """The vibration test (`lastlayer` docstring) for free amplitudes: at 20 dB the first-mode vibration stands
+    well above the noise and its frequency follows EI; the same features explaining far noisier data (noise
+    30x) hold it at the fitted EI. With tied amplitudes (the profiles' default) the amplitude is the loads',
+    not fitted noise, and the first mode follows EI at both noise levels."""
+    cfg, data, problem, tied_res = smoke_fit
     sd = float(np.std(data.value - data.value_true))
     noisy = data.with_values(
         data.value + 30 * sd * np.random.default_rng(5).standard_normal(len(data))
     )
-    hid = LastLayer(model, 0, problem, noisy, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
+    s = TrainSettings.for_profile("smoke", optimizer="adam", free_modes=3, tie_vibration=False)
+    free_res = fit(problem, s, seed=0, quiet=True)
+
+    def last_layer(res, d):
+        return LastLayer(
+            res.model(), 0, problem, d, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10
+        )
+
+    ll = last_layer(free_res, data)
+    assert ll.first_mode_varies and ll.vibration_z2 > ll.vibration_threshold and ll.nv > 0
+    hid = last_layer(free_res, noisy)
     assert not hid.first_mode_varies and hid.vibration_z2 < hid.vibration_threshold and hid.nv == 0
     assert hid.kf == hid.k
+    for d in (data, noisy):
+        tied = last_layer(tied_res, d)
+        assert tied.first_mode_varies and tied.nv == 1
 
 
 def test_full_weight_model_is_the_last_layer_one_with_free_hidden_weights(smoke_fit):

@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from bayespinn.pinn.enrich import FreeVibration, StaticEnrichment
+from bayespinn.pinn.enrich import FreeVibration, StaticEnrichment, TiedVibration
 from bayespinn.pinn.network import PINN
 
 #: float32 agreement: both engines round differently through 5 layers; observed ~5e-7, 1e-4 is the brief's bar
@@ -23,6 +23,12 @@ CASES = [
         extras=(
             StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05),
             FreeVibration((0.0, 0.3, 0.7), 2, 30.0, 0.02),
+        )
+    ),
+    dict(
+        extras=(
+            StaticEnrichment((1.0, 0.8), (0.0, 0.3), 1.2, 0.05, frequency=30.0, damping=0.02),
+            TiedVibration((0.0, 0.3, 0.7), 3, 30.0, 0.02, (1.0, 0.8), (0.0, 0.3), 1.2, 0.05),
         )
     ),
 ]

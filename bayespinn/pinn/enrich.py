@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import torch
 from torch import Tensor
@@ -68,6 +68,21 @@ MAX_R2 = 0.81
 def n_terms(beta_rel: float, tol: float = SERIES_TOL) -> int:
     """Terms needed for the series of a Gaussian of width beta_rel (beta / L): g_n < tol beyond."""
     return max(8, int(math.ceil(2.0 * math.sqrt(math.log(1.0 / tol)) / (math.pi * beta_rel))) + 1)
+
+
+def forced_amplification(
+    r1: float, n: Tensor, log_ei: Tensor, damping: float
+) -> tuple[Tensor, Tensor | None]:
+    """(D_n - 1, the quadrature part or None without damping) of modes n (K,) at log(EI / EI_ref) (M,), for
+    r_1 = Omega_1 / omega_1 at EI_ref: mode n's forced response is (1 + a_n) sin(Omega_n t) +
+    b_n cos(Omega_n t) times its static amplitude; shapes (M, K)."""
+    r = r1 / (n * torch.exp(0.5 * log_ei).unsqueeze(-1))  # Omega_n / omega_n
+    r2 = (r * r).clamp(max=MAX_R2)
+    z = damping
+    if z == 0.0:
+        return 1.0 / (1.0 - r2) - 1.0, None
+    den = (1.0 - r2) ** 2 + (2.0 * z) ** 2 * r2
+    return (1.0 - r2) / den - 1.0, -2.0 * z * r2.sqrt() / den
 
 
 def _compiling() -> bool:
@@ -149,13 +164,7 @@ class StaticEnrichment:
         static amplitude; shapes (M, K_a)."""
         K = self.amplified_modes
         n = torch.arange(1, K + 1, dtype=log_ei.dtype, device=log_ei.device)
-        r = self._r1() / (n * torch.exp(0.5 * log_ei).unsqueeze(-1))  # Omega_n / omega_n
-        r2 = (r * r).clamp(max=MAX_R2)
-        z = self.damping
-        if z == 0.0:
-            return 1.0 / (1.0 - r2) - 1.0, None
-        den = (1.0 - r2) ** 2 + (2.0 * z) ** 2 * r2
-        return (1.0 - r2) / den - 1.0, -2.0 * z * r2.sqrt() / den
+        return forced_amplification(self._r1(), n, log_ei, self.damping)
 
     def _r1(self) -> float:
         """r_1 at EI_ref: Omega_1 / omega_1 = pi (v T / L) / W_1 (alpha at EI_ref)."""
@@ -361,3 +370,116 @@ class FreeVibration:
         d_fixed = d_all - low.n_features
         quiet = slice(d_all - self.n_features, d_fixed) if self.pde_exact else None
         return low, d_fixed, quiet
+
+
+#: transients of modes above K_v are below this share of the first mode's static amplitude (module
+#: docstring of `TiedVibration`): 100x below the noise at the highest SNR bayespinn is meant for (40 dB)
+TRANSIENT_TOL = 1e-4
+
+
+def transient_modes(r1: float, tol: float = TRANSIENT_TOL) -> int:
+    """K_v: the modes whose free vibrations `TiedVibration` carries, for r_1 = alpha at EI_ref.
+
+    Mode n's free vibration from an axle event has amplitude r_n S_n = r_1 n^-5 S_1 (S_n its static
+    amplitude, ~ n^-4): the smallest K with 2 r_1 (K + 1)^-5 below `tol` (r doubled: EI may be down to
+    EI_ref / 4, `AMPLIFIED_EI_MARGIN`), at least 1. 3 modes at the Exeter girder's alpha (0.021), 5 at 0.2."""
+    K = 1
+    while 2.0 * r1 * (K + 1) ** -5 >= tol and K < 64:
+        K += 1
+    return K
+
+
+@dataclass(frozen=True)
+class TiedVibration(FreeVibration):
+    """The free vibrations that the axles start, with the amplitudes the physics gives them: one column per mode.
+
+    `FreeVibration` gives each mode two free coefficients per axle event (an entry or an exit). A truck of
+    J axles has 2 J events, so K modes cost 4 J K coefficients (60 for five axles and three modes), which
+    the data must pay for: fitted to noise they widen EI's posterior and bias it. Bridge 9 of the family
+    (10.8 m, four axles, alpha 0.044, 30 dB): the B-PINN's sd was 2.54x the reference's and its mean 7.1
+    reference sds low; a linear analog of the last layer shows the same from the free amplitudes alone
+    (sd 2.7x, 10.9 sds low; tied: 1.11x, -0.28 sd; `tests/test_enrich.py`), and with tied amplitudes the
+    B-PINN gives 1.10x and -0.67 sd. But those amplitudes are not free. From rest, the state of mode n is continuous
+    across every event, and the forced response the enrichment carries is not: an axle entering starts
+    S [(1 + a_n) sin(Omega_n s) + b_n cos(Omega_n s)] (S its static amplitude, a_n and b_n the amplification of
+    `forced_amplification`), with displacement S b_n and velocity S (1 + a_n) Omega_n at s = 0; leaving at
+    s_e = L / v, it stops with (-1)^n times those. So each event starts the free vibration that cancels
+    that jump, with amplitudes fixed by the axle's load, the mode and EI:
+
+        h_n(s) = e^{-zeta W_n s} (A sin(w_n s) + B cos(w_n s)),  B = -S b_n,  A = (-S (1 + a_n) Omega_n + zeta W_n B) / w_n
+
+    at an entry, (-1)^(n+1) times that at an exit (w_n = W_n sqrt(1 - zeta^2)). Summed over the events, mode n's
+    free vibration is one function of EI, and its column's coefficient is the enrichment's (the initial
+    conditions tie the two: at the first entry the enrichment's velocity is the column's with the opposite
+    sign). Each column is an exact homogeneous solution (zero damping), so its PDE residual is zero, and the
+    total of enrichment and columns is the exact modal response of the Gaussian loads for the first K_v modes
+    (`transient_modes`; checked against `physics.modal.ModalModel` in the tests). The modes above K_v start
+    vibrations below `TRANSIENT_TOL` of the first mode's static amplitude; the network keeps any rest.
+
+    loads, delays, speed, beta_rel : as `StaticEnrichment`'s; events, modes, frequency, damping : as
+    `FreeVibration`'s (events are kept for the record; the jet uses the axles).
+    """
+
+    loads: tuple[float, ...] = ()
+    delays: tuple[float, ...] = ()
+    speed: float = 1.0
+    beta_rel: float = 0.025
+
+    @property
+    def n_features(self) -> int:
+        return self.modes
+
+    def jet(
+        self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor, detach: bool = True
+    ) -> Jet:
+        """Jet of the K columns (highest mode first, as `FreeVibration`) at points (M, N): (M, N, K)."""
+        lei = (log_ei.detach() if detach else log_ei).to(xi.dtype)
+        n = torch.arange(1, self.modes + 1, dtype=xi.dtype, device=xi.device)  # (K,)
+        k = math.pi * n
+        kxi = xi.unsqueeze(-1) * k  # (M, N, K)
+        sx, cx = torch.sin(kxi), torch.cos(kxi)
+        x_parts = [sx, cx, -sx, -cx]
+        # static amplitude per unit load (the enrichment's series coefficient) and the entry amplitudes
+        S = 2.0 * torch.exp(-((k * self.beta_rel) ** 2) / 4.0) / k**4 * 48.0  # (K,)
+        a, b = forced_amplification(math.pi * self.speed / self.frequency, n, lei, self.damping)
+        a, b = a.unsqueeze(1), (None if b is None else b.unsqueeze(1))  # (M, 1, K)
+        W = (self.frequency * torch.exp(0.5 * lei)).view(-1, 1, 1) * n**2  # (M, 1, K)
+        z = self.damping
+        dec, w = z * W, W * math.sqrt(1.0 - z * z)
+        Om = k * self.speed
+        B0 = torch.zeros_like(a) if b is None else -b
+        A0 = (-(1.0 + a) * Om + dec * B0) / w
+        A0, B0 = A0 * S, B0 * S
+        exit_sign = -((-1.0) ** n)  # (-1)^(n + 1)
+        T = [torch.zeros_like(kxi) for _ in range(kt + 1)]
+        for p, d in zip(self.loads, self.delays, strict=True):
+            for t0, sign in ((d, 1.0), (d + 1.0 / self.speed, exit_sign)):
+                if t0 >= 1.0:
+                    continue
+                s = (tau - t0).unsqueeze(-1)
+                sp = s.clamp_min(0.0)
+                e = torch.exp(-dec * sp) * (s >= 0.0).to(xi.dtype)
+                sn, cs = torch.sin(w * sp), torch.cos(w * sp)
+                A, B = p * sign * A0, p * sign * B0
+                T[0] = T[0] + e * (A * sn + B * cs)
+                if kt >= 1:
+                    T[1] = T[1] + e * (A * (-dec * sn + w * cs) + B * (-dec * cs - w * sn))
+                if kt >= 2:
+                    c2 = dec * dec - w * w
+                    T[2] = T[2] + e * (
+                        A * (c2 * sn - 2 * dec * w * cs) + B * (c2 * cs + 2 * dec * w * sn)
+                    )
+
+        def xfac(m: int) -> Tensor:
+            return k**m * x_parts[m % 4]
+
+        X0 = xfac(0)
+        return Jet(
+            (X0 * T[0]).flip(-1),
+            tuple((xfac(m) * T[0]).flip(-1) for m in range(1, kx + 1)),
+            tuple((X0 * T[m]).flip(-1) for m in range(1, kt + 1)),
+        )
+
+    def lowest(self) -> TiedVibration:
+        """The first mode alone: its column is the trailing one of this one's."""
+        return replace(self, modes=1)

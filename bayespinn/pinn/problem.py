@@ -19,7 +19,7 @@ import torch
 
 from ..config import Beam, Config, Vehicle
 from ..data.measurements import Measurements
-from .enrich import FreeVibration, StaticEnrichment
+from .enrich import FreeVibration, StaticEnrichment, TiedVibration, transient_modes
 
 #: default Gaussian delta width as a fraction of the span (beta = 0.025 L)
 DEFAULT_BETA_REL = 0.025
@@ -157,18 +157,33 @@ class Problem:
             damping=float(self.beam.damping_ratio) if forced else 0.0,
         )
 
-    def free_vibration(self, modes: int) -> FreeVibration:
-        """Free vibrations of the first `modes` modes from each axle entry and exit inside [0, T) (`enrich`)."""
+    def free_vibration(
+        self, modes: int, tied: bool = False, beta_rel: float = DEFAULT_BETA_REL
+    ) -> FreeVibration:
+        """Free vibrations of the first `modes` modes from each axle entry and exit inside [0, T) (`enrich`):
+        with free amplitudes, or with ``tied`` the amplitudes the axles give them (`enrich.TiedVibration`,
+        for the Gaussian loads of width ``beta_rel``)."""
         sc = self.scales
         d = self.vehicle.delays
         times = np.concatenate([d, d + self.beam.length / self.vehicle.speed]) / sc.T
         events = tuple(sorted({round(float(e), 12) for e in times if 0.0 <= e < 1.0}))
-        return FreeVibration(
+        common = dict(
             events=events,
             modes=int(modes),
             frequency=sc.time_frequency,
             damping=float(self.beam.damping_ratio),
         )
+        if not tied:
+            return FreeVibration(**common)
+        E = self.enrichment(beta_rel)
+        return TiedVibration(
+            **common, loads=E.loads, delays=E.delays, speed=E.speed, beta_rel=E.beta_rel
+        )
+
+    def transient_modes(self) -> int:
+        """K_v for this bridge (`enrich.transient_modes`): from its speed parameter at EI_ref."""
+        E = self.enrichment()
+        return transient_modes(math.pi * E.speed / self.scales.time_frequency)
 
     def tensors(
         self,

@@ -66,7 +66,11 @@ class TrainSettings:
         the enrichment's coefficient mistakes the first mode's amplification for flexibility and EI comes
         out low by about alpha^2 (`enrich` module docstring)
     free_modes : number of modes K whose free vibrations, started at every axle entry and exit, are output
-        basis functions (`enrich.FreeVibration`; 0: none; off in the paper profile)
+        basis functions (`enrich.FreeVibration`; 0: none; off in the paper profile); 'auto': K_v from the
+        bridge's speed parameter (`enrich.transient_modes`: 3 at alpha = 0.02, 5 at 0.2)
+    tie_vibration : the free vibrations carry the amplitudes the axles give them, one column per mode
+        (`enrich.TiedVibration`; needs the forced enrichment), not two free coefficients per mode and axle
+        event: those are fitted to noise and widen and bias EI on trucks with many axles
     engine : 'taylor' (default), 'taylor-unfused' or 'autograd' (nested autograd, slow reference)
     compile : torch.compile the loss ('auto': on for CUDA, off for CPU; falls back to eager on failure)
     dtype : 'float32' (the paper's FP32) or 'float64'
@@ -108,7 +112,8 @@ class TrainSettings:
     oscillator: bool = False
     enrich: bool = True
     enrich_forced: bool = True
-    free_modes: int = 3
+    free_modes: int | str = "auto"
+    tie_vibration: bool = True
     engine: str = "taylor"
     compile: str | bool = "auto"
     dtype: str = "float32"
@@ -133,8 +138,13 @@ class TrainSettings:
                 raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 1")
         for name in ("epochs", "resample_every", "lbfgs_iters", "free_modes"):
             v = getattr(self, name)
+            if name == "free_modes" and v == "auto":
+                continue
             if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise ValueError(f"TrainSettings.{name}: got {v!r}, expected an integer >= 0")
+                raise ValueError(
+                    f"TrainSettings.{name}: got {v!r}, expected an integer >= 0"
+                    + (" or 'auto'" if name == "free_modes" else "")
+                )
         for name in (
             "lr",
             "lr_final",
@@ -178,6 +188,11 @@ class TrainSettings:
             raise ValueError(
                 "TrainSettings.enrich: got True with images=False, expected images=True "
                 "(the enrichment solves the Gaussian loads with their images)"
+            )
+        if self.tie_vibration and self.free_modes and not (self.enrich and self.enrich_forced):
+            raise ValueError(
+                "TrainSettings.tie_vibration: got True without the forced enrichment, expected "
+                "enrich=True and enrich_forced=True (the tied amplitudes cancel the forced response's jumps)"
             )
         if self.n_bc < 2:
             raise ValueError(f"TrainSettings.n_bc: got {self.n_bc}, expected >= 2 (both supports)")
@@ -257,6 +272,7 @@ PROFILES: dict[str, TrainSettings] = {
         oscillator=False,
         enrich=False,
         free_modes=0,
+        tie_vibration=False,
         beta_rel=0.025,
         checkpoint_every=2000,
         log_every=200,

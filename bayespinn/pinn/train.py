@@ -102,7 +102,8 @@ def _build_model(problem: Problem, s: TrainSettings, members: int, generators=No
     if s.enrich:
         extras.append(problem.enrichment(s.beta_rel, forced=s.enrich_forced))
     if s.free_modes:
-        extras.append(problem.free_vibration(s.free_modes))
+        K = problem.transient_modes() if s.free_modes == "auto" else s.free_modes
+        extras.append(problem.free_vibration(K, tied=s.tie_vibration, beta_rel=s.beta_rel))
     return PINN(
         s.width,
         s.depth,
