@@ -189,6 +189,9 @@ SD_RATIO_SHARE = 0.85
 SIGMA_Z_MAX = 2.0
 SIGMA_SHARE = 0.90
 ALPHA_SPLIT = 0.04
+#: "no trend of z with alpha": Spearman's rank correlation not significant at this level (the false-failure
+#: rate of that criterion for a method whose z does not depend on alpha)
+TREND_P_MIN = 0.01
 
 
 def score(summary_methods: dict, reference_key: str) -> dict:
@@ -263,6 +266,7 @@ def criteria(rows: list[dict]) -> dict:
 
         rho, p = stats.spearmanr(alpha, z)
         out["trend"] = {"spearman_rho": float(rho), "p_value": float(p)}
+        out["pass"]["no_trend"] = bool(p >= TREND_P_MIN)
     return out
 
 

@@ -244,7 +244,8 @@ def blocks(page: dict) -> list:
             f"±{family.Z_MEAN_MAX}, sd of z at most {family.Z_SD_MAX}, |z| at most {family.Z_ABS_MAX} on every "
             f"bridge, sd ratio in [{lo}, {hi}] on at least {100 * family.SD_RATIO_SHARE:.0f} % of bridges, "
             f"sigma within {family.SIGMA_Z_MAX:g} reference sds on at least {100 * family.SIGMA_SHARE:.0f} %. "
-            "Trend: Spearman's rank correlation of z with alpha (small p: z drifts with the dynamics)."
+            "Trend: Spearman's rank correlation of z with alpha (small p: z drifts with the dynamics; "
+            f"p below {family.TREND_P_MIN:g} fails)."
         ),
     ]
     for s in page["studies"].values():
@@ -273,7 +274,10 @@ def blocks(page: dict) -> list:
                     _ok(f"{100 * cr['sigma_within']:.0f} %", p["sigma_within"]),
                     "n/a"
                     if not trend
-                    else f"{trend['spearman_rho']:+.2f} (p {trend['p_value']:.3f})",
+                    else _ok(
+                        f"{trend['spearman_rho']:+.2f} (p {trend['p_value']:.3f})",
+                        p.get("no_trend", True),
+                    ),
                     "today's code" if cr["fresh"] else "**stale**",
                 )
             )

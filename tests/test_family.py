@@ -112,6 +112,7 @@ def test_criteria_pass_a_calibrated_method_and_fail_a_drifting_one():
     bad = family.criteria(_rows(drift, np.ones(n), np.zeros(n), alpha))
     assert not bad["pass"]["mean_z"] and not bad["pass"]["max_abs_z"]
     assert bad["trend"]["spearman_rho"] < -0.5 and bad["trend"]["p_value"] < 0.01
+    assert not bad["pass"]["no_trend"] and good["pass"]["no_trend"]
 
 
 def test_score_against_the_reference():
@@ -124,13 +125,13 @@ def test_score_against_the_reference():
     assert "z" not in s["modal_mcmc"]
 
 
-def _study(*args, expect=0):
+def _study(*args, expect=0, timeout=600):
     r = subprocess.run(
         [sys.executable, str(REPO / "studies" / "family.py"), *args],
         cwd=REPO,
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=timeout,
         env={**os.environ, "MPLBACKEND": "Agg"},
     )
     assert r.returncode == expect, r.stderr[-4000:]
@@ -187,3 +188,22 @@ def test_study_bad_input_exits_2_and_writes_nothing(tmp_path, flags, field):
     assert field in r.stderr and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("case", "snr", "bridges"),
+    [("deflection", "30", 24), ("deflection", "10", 12), ("strain", "30", 6)],
+)
+def test_full_family_study_meets_the_bands(tmp_path, case, snr, bridges):
+    """Issue 21's must-show, as run by `studies/family.py` (fast profile; hours on a 2-core CPU): every
+    criterion of `family.criteria` for both PINN methods, the trend of z with alpha included."""
+    _study(
+        "--bridges", str(bridges), "--snr", snr, "--case", case, "--out", str(tmp_path), "--quiet",
+        timeout=bridges * 900,
+    )  # fmt: skip
+    page = json.loads((tmp_path / "family.json").read_text())
+    crit = page["studies"][f"{case}-snr{snr}"]["criteria"]
+    for k in ("ensemble", "bpinn"):
+        assert crit[k]["bridges"] == bridges
+        assert all(crit[k]["pass"].values()), (k, crit[k])
