@@ -500,3 +500,35 @@ def test_bpinn_shares_the_ensembles_fit_and_is_the_same_function_of_the_seed():
     shared_fit.clear()
     other = bp.analyse(data, cfg, methods="bpinn", seed=6, profile="smoke").posteriors["bpinn"]
     assert other.diagnostics["fit_EI"] != alone.diagnostics["fit_EI"]
+
+
+@pytest.mark.parametrize("noise_factor", [1.0, 30.0])
+def test_local_width_is_the_marginals_sd_on_a_grid(smoke_fit, noise_factor):
+    """`LastLayer.local_sd_log_theta` (the ensemble members' own width) is the sd of log theta under the
+    last-layer marginal (sigma held) times the prior's curvature: checked against a brute-force grid of
+    8001 points over +-2 in log theta, at the smoke fit's noise and 30x it."""
+    cfg, data, problem, res = smoke_fit
+    sd = float(np.std(data.value - data.value_true))
+    d = data.with_values(
+        data.value + (noise_factor - 1) * sd * np.random.default_rng(5).standard_normal(len(data))
+    )
+    ll = LastLayer(res.model(), 0, problem, d, np.random.default_rng(0), n_pde=40, n_bc=10, n_ic=10)
+    lt = math.log(ll.theta_fit)
+    ls = math.log(ll.noise_mode(lt))
+    prior_sd = 0.5
+    got = ll.local_sd_log_theta(lt, ls, prior_sd)
+    g = lt + np.linspace(-2.0, 2.0, 8001)
+    with torch.no_grad():
+        lp = np.array(
+            [
+                float(ll.log_marginal(torch.tensor(v, dtype=torch.float64), torch.tensor(ls)))
+                for v in g
+            ]
+        )
+    lp -= 0.5 * ((g - lt) / prior_sd) ** 2
+    p = np.exp(lp - lp.max())
+    p /= p.sum()
+    m = (p * g).sum()
+    want = math.sqrt((p * (g - m) ** 2).sum())
+    assert p[0] < 1e-6 and p[-1] < 1e-6  # the brute-force grid holds the whole density
+    assert got == pytest.approx(want, rel=0.01)

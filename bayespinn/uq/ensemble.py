@@ -8,10 +8,14 @@ collocation stream) is trained in two phases through the one training loop:
    (y + sigma_hat eps_m) with its own perturbed prior anchor (log EI_0 + s eta_m), under the
    posterior-scaled objective. For a linear-Gaussian problem the fits are then exact posterior draws.
 
-Five draws estimate a spread to about +-35 %, so each member also reports its own local (Laplace)
-width of log EI, from the exact last-layer marginal likelihood of its trained features (`lastlayer`).
+Five draws estimate a spread to about +-35 %, so each member also reports its own local width of log
+EI, from the exact last-layer marginal likelihood of its trained features (`lastlayer`), as the sd of that
+marginal on a grid (`LastLayer.local_sd_log_theta`): the Laplace width where the marginal is Gaussian, and
+the true width where it is not. (The curvature alone under-stated it at 10 dB, where the first mode's
+frequency makes the marginal skewed: the quick start's members gave 1.8 % where the B-PINN's NUTS on the
+same kind of model gave 2.5 %, and the ensemble's sd came out 0.53x the reference's.)
 The ensemble's variance of log EI is the conjugate pooling of the two estimates of the same quantity:
-(nu0 s_laplace^2 + (M - 1) S_between^2) / (nu0 + M - 1), nu0 = `LAPLACE_DOF`, so the between-member
+(nu0 s_local^2 + (M - 1) S_between^2) / (nu0 + M - 1), nu0 = `LAPLACE_DOF`, so the between-member
 spread (which also carries training noise) dominates as M grows.
 
 The noise level comes from the same last-layer marginal likelihood, not from the trained network's raw
@@ -19,7 +23,7 @@ residuals: with its physics penalties of weight one, a network of 5 x 64 neurons
 noise (its residuals under-state sigma by 25-35 % at 10-20 dB), while the marginal, whose output
 weights are held to the physics at the scale the network achieves, counts what the fit spent. Per
 member, p(sigma | EI_m, y) on a grid of log sigma (log-uniform prior); its mode sets the perturbation
-of randomise-then-optimise (phase 1 members) and the Laplace width (phase 2 members), and sigma's
+of randomise-then-optimise (phase 1 members) and the local width (phase 2 members), and sigma's
 posterior draws are taken from the members' grids in equal shares.
 
 Where members train: on a CPU each member of each phase is one task (`train_member`) of the executor
@@ -52,13 +56,13 @@ from .shared_fit import member_fit, member_seed, remember
 
 log = logging.getLogger(__name__)
 
-#: the members' mean Laplace variance counts as this many degrees of freedom in the pooled variance
+#: the members' mean local variance counts as this many degrees of freedom in the pooled variance
 LAPLACE_DOF = 4
 #: share of the profile's Adam steps spent in the randomise-then-optimise phase
 RTO_FRACTION = 0.25
 #: posterior draws stored
 N_DRAWS = 4000
-#: members scattering more than this many times their own Laplace sd are flagged as not converged
+#: members scattering more than this many times their own local sd are flagged as not converged
 #: (with 5 members the sample sd is itself uncertain by ~35 %, so 3x is far outside chance)
 MAX_SCATTER_RATIO = 3.0
 
@@ -113,11 +117,11 @@ def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
 def pool_log_ei(
     log_ei_m: np.ndarray, lap_sd: np.ndarray, prior_log_sd: float
 ) -> tuple[float, float, float, float]:
-    """(between-member variance, mean Laplace variance, its dof, pooled variance) of log EI.
+    """(between-member variance, mean local variance, its dof, pooled variance) of log EI.
 
     pooled = (nu lap_var + (M - 1) between) / (nu + M - 1), nu = `LAPLACE_DOF` x the share of members
     with a local width: a member whose last-layer marginal has no peak in EI at its own fit (nan; seen at
-    10 dB, its curvature there positive) gives none, and the Laplace term rests on the others. With no
+    10 dB, its curvature there positive) gives none, and the local term rests on the others. With no
     width and no spread (one member, nan) the prior's variance is returned.
     """
     log_ei_m, lap_sd = np.asarray(log_ei_m, float), np.asarray(lap_sd, float)
@@ -421,7 +425,7 @@ def ensemble_posterior(
     with torch_threads(1):
         lap_sd = np.array(
             [
-                ll.laplace_sd_log_theta(math.log(ll.theta_fit), math.log(g.mode), ei_prior.log_sd)
+                ll.local_sd_log_theta(math.log(ll.theta_fit), math.log(g.mode), ei_prior.log_sd)
                 for ll, g in zip(lls, grids, strict=True)
             ]
         )
@@ -431,7 +435,7 @@ def ensemble_posterior(
         bad = [int(i) for i in np.flatnonzero(~np.isfinite(lap_sd))]
         warn.append(
             f"member(s) {bad}: the last-layer marginal likelihood has no peak in EI at the member's own "
-            "fit, so they give no local (Laplace) width; the interval rests on the other members' widths "
+            "fit, so they give no local width; the interval rests on the other members' widths "
             "and on the spread between members"
         )
     mu = float(np.mean(log_ei_m))
@@ -443,20 +447,20 @@ def ensemble_posterior(
     info = {
         "members": M,
         "member_EI": member_EI.tolist(),
-        "member_laplace_sd_log_EI": [float(v) if np.isfinite(v) else None for v in lap_sd],
+        "member_local_sd_log_EI": [float(v) if np.isfinite(v) else None for v in lap_sd],
         "between_sd_log_EI": math.sqrt(between),
-        "laplace_sd_log_EI": math.sqrt(lap_var),
-        "pooling": f"conjugate: Laplace variance with {lap_dof:g} dof + between-member variance with {M - 1} dof",
+        "local_sd_log_EI": math.sqrt(lap_var),
+        "pooling": f"conjugate: local (grid) variance with {lap_dof:g} dof + between-member variance with {M - 1} dof",
         "sigma_hat_rto": sigma_hat,
         "member_sigma_mode": [g.mode for g in grids],
         "member_first_mode_follows_EI": [ll.first_mode_varies for ll in lls],
         "identified": ident,
     }
     if M == 1:
-        info["note"] = "a single member has no spread: its interval is its own Laplace width only"
+        info["note"] = "a single member has no spread: its interval is its own local width only"
     if not ident:
         info["note"] = "EI is not identified by these data"
-    # self-check: members that scatter far more than each one's own (Laplace) uncertainty have not
+    # self-check: members that scatter far more than each one's own (local) uncertainty have not
     # converged to the same answer; the pooled interval then mostly measures optimisation scatter
     if M > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var:
         msg = (

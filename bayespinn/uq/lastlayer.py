@@ -84,6 +84,13 @@ PDE_SD_FACTOR = 10.0
 VIBRATION_FALSE_ALARM = 0.01
 #: prior sd of the stiffness-scaled output weights gamma, as a multiple of the largest fitted one
 WEIGHT_PRIOR_FACTOR = 10.0
+#: `local_sd_log_theta`'s grid: points, starting half-width in Laplace sds, doublings allowed, and the
+#: density (relative to the peak) its ends must fall below (1e-4: the tails beyond hold < 1e-4 of the mass
+#: of a Gaussian, so the sd is off by less than 0.1 %)
+GRID_POINTS = 321
+GRID_HALF_WIDTH = 6.0
+GRID_DOUBLINGS = 4
+GRID_EDGE = 1e-4
 
 
 def feature_jet(
@@ -363,6 +370,33 @@ class LastLayer:
         if not -float(h) > 0:
             return float("nan")
         return 1.0 / math.sqrt(-float(h) + 1.0 / prior_sd**2)
+
+    def local_sd_log_theta(
+        self, log_theta: float, log_sigma: float, prior_sd: float, points: int = GRID_POINTS
+    ) -> float:
+        """sd of log theta under the log marginal (sigma held) times the prior's curvature, on a grid
+        around log_theta: the Laplace width where the marginal is Gaussian, and the true width where it is
+        not (at 10 dB the first mode's frequency makes it skewed and heavy-tailed: measured on the quick
+        start's members, Laplace 1.8 % against 2.5 % from NUTS). The grid starts at +-GRID_HALF_WIDTH Laplace
+        sds (or the prior sd where there is no curvature) and doubles until its ends hold less than
+        GRID_EDGE of the peak density; nan when the density never falls (no local width)."""
+        lap = self.laplace_sd_log_theta(log_theta, log_sigma, prior_sd)
+        half = GRID_HALF_WIDTH * lap if math.isfinite(lap) else prior_sd
+        ls = torch.tensor(log_sigma, dtype=torch.float64)
+        for _ in range(GRID_DOUBLINGS + 1):
+            g = log_theta + np.linspace(-half, half, points)
+            with torch.no_grad():
+                lp = np.array(
+                    [float(self.log_marginal(torch.tensor(v, dtype=torch.float64), ls)) for v in g]
+                )
+            lp = lp - 0.5 * ((g - log_theta) / prior_sd) ** 2
+            p = np.exp(lp - lp.max())
+            if max(p[0], p[-1]) < GRID_EDGE:
+                p /= p.sum()
+                m = float((p * g).sum())
+                return math.sqrt(float((p * (g - m) ** 2).sum()))
+            half *= 2.0
+        return float("nan")
 
     def predictive(
         self, x, t, kx: int, draws_log_theta, draws_log_sigma, rng: np.random.Generator
