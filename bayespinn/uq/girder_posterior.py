@@ -1,0 +1,819 @@
+"""Reference posterior of a real girder: emcee on the reduced modal surrogate of `physics.fe_modal`.
+
+Parameters theta = (log EI_s for each of S equal segments, log k_left and log k_right when the bearing
+springs are inferred, the log of the common axle-load factor when it is inferred); Gaussian white
+noise of unknown sd sigma. The load factor is sampled in log so that the quasi-static ridge
+EI / load factor = const is a straight line in theta.
+
+* Priors. log EI_s ~ N(log EI_median, EI_log_sd), independent (the `EIPrior` of every segment);
+  log k ~ N(log k_median, k_log_sd) at each support; load factor ~ N(1, load_rel_sd) truncated to > 0
+  (the law `data.girder_data.draw_load_factor` draws the truth from; its density in log load factor
+  carries the Jacobian, the factor itself). Every parameter is confined to 10 prior sd around its
+  prior centre (the load factor to [max(1 - 10 load_rel_sd, 1e-3), 1 + 10 load_rel_sd]; prior mass
+  cut off below 1e-8), which keeps the surrogate in its range.
+* sigma: log-uniform (Jeffreys), integrated out exactly as `modal_mcmc`'s collapsed sampler does:
+  p(theta | y) is proportional to p(theta) RSS(theta)^(-n/2); afterwards sigma^2 | theta, y ~
+  InvGamma(n/2, RSS/2) is drawn exactly for every draw (RSS recovered from the stored log density).
+* Likelihood: `GirderModalModel` (exact FE static part plus n_modes modal corrections). n_modes is the
+  smallest of 6, 12, 24, 48 whose predictions at the MAP differ from twice as many modes by at most
+  `modal_mcmc.TRUNCATION_FRACTION` of the MAP sigma (as `modal_mcmc.choose_modes`); the surrogate's
+  reduced basis is referenced at the MAP.
+* MAP: a scan of a common log EI, then L-BFGS-B on theta (central-difference gradients, evaluated as
+  one batch); with springs inferred from three spring starts. Laplace covariance from a batched
+  central-difference Hessian (eigenvalues floored at the smallest prior precision).
+* emcee with its differential-evolution move (`DEMove`; the stretch move is an option). Measured on
+  the damaged Exeter girder (5 segments, 100 deflection points, 30 dB; the machine's other core busy):
+  tau 34-39 steps with DEMove against 103-110 with the stretch move; long runs of both give segment
+  sds within 3 % (DEMove) and 5 % (stretch) of an importance sampler's (multivariate-t proposal,
+  2e5 draws, weight ESS 970). emcee 3.1.6's `DESnookerMove` (mixed in at 0.2, as emcee's docs
+  suggest) gave segment sds 10-16 % too small: its step along the snooker line is
+  gamma |s - z| (u . (z1 - z2)) with u the unit direction, i.e. it grows with the distance from the
+  anchor walker z (`u = delta / sqrt(norm)` where the method needs delta / norm), which its
+  acceptance factor does not correct; it is not used.
+* `n_groups` independent ensembles, each of max(16, 2 dim) walkers rounded up to even, i.e.
+  max(32, 4 dim) walkers in all for two groups, started from MAP + Laplace-covariance draws. The run
+  grows in chunks until the post-burn-in part (burn-in: `burn_factor` tau) is at least `tau_factor`
+  integrated autocorrelation times long and the tau estimate changed by less than `tau_rtol` since the
+  previous check, or `max_steps` is reached (a warning). tau: emcee's estimate on the last two thirds
+  of each group's chain, the largest over parameters and groups.
+* Diagnostics per parameter (every segment EI, each spring, the load factor, sigma and the derived
+  span-averaged EI): ArviZ rank-normalised split R-hat and bulk/tail ESS with one chain per
+  independent group (its walkers' trajectories one after another, as `sampler.sample` arranges them);
+  `converged` when every R-hat <= RHAT_MAX and every ESS >= ESS_MIN.
+
+Derived: the span-averaged EI = L / integral dx / EI = S / sum_s (1 / EI_s) (equal segments), and
+`p_damaged` per segment, the posterior probability that EI_s < 0.9 EI_nominal (default: the prior
+median). `GirderPosterior.summary()` uses the keys of the contract's "Real girders" section.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .. import seeding
+from ..config import Beam, Vehicle, _check_number
+from ..data.girder_data import check_load_rel_sd
+from ..data.measurements import Measurements
+from ..errors import InputError
+from ..physics.fe_modal import GirderModalModel
+from ..physics.girder import Girder
+from .modal_mcmc import TRUNCATION_FRACTION
+from .posterior import jsonable, mcmc_diagnostics, summarise
+from .priors import EIPrior, NoisePrior
+from .sampler import ESS_MIN, RHAT_MAX
+
+SUPPORTS = ("pinned", "springs")
+LOAD_FACTOR_MODES = ("auto", "off")
+#: a segment is damaged when its EI is below this fraction of EI_nominal
+DAMAGE_FRACTION = 0.9
+#: every parameter is confined to this many prior sd around its prior centre
+SUPPORT_SD = 10.0
+#: mode counts tried in turn by the truncation check
+MODE_STEPS = (6, 12, 24, 48)
+#: largest batch of parameter sets per surrogate call
+BATCH = 512
+
+
+@dataclass(frozen=True)
+class GirderMCMCSettings:
+    """emcee run for the girder posterior: walkers from the dimension, run length from tau."""
+
+    n_groups: int = 2
+    min_walkers: int = 32
+    walkers_per_dim: int = 4
+    chunk: int = 200
+    min_steps: int = 600
+    max_steps: int = 40000
+    tau_factor: float = 50.0
+    burn_factor: float = 5.0
+    tau_rtol: float = 0.1
+    #: initial cloud: MAP + start_scale x Laplace-covariance draws
+    start_scale: float = 1.0
+    #: emcee moves: "de" (emcee's DEMove, differential evolution) or "stretch" (emcee's default)
+    moves: str = "de"
+
+    def __post_init__(self) -> None:
+        for name in (
+            "n_groups",
+            "min_walkers",
+            "walkers_per_dim",
+            "chunk",
+            "min_steps",
+            "max_steps",
+        ):
+            v = getattr(self, name)
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, int)
+                or v < (2 if name == "n_groups" else 1)
+            ):
+                raise InputError(f"mcmc.{name}", v, "an integer >= 1 (n_groups >= 2)")
+        for name in ("tau_factor", "burn_factor", "tau_rtol", "start_scale"):
+            _check_number(f"mcmc.{name}", getattr(self, name), positive=True)
+        if self.moves not in ("stretch", "de"):
+            raise InputError("mcmc.moves", self.moves, "'stretch' or 'de'")
+
+    def walkers_per_group(self, dim: int) -> int:
+        """max(min_walkers, walkers_per_dim x dim) over the groups, even, and >= 2 dim per group
+        (emcee's red-blue moves need twice the dimension)."""
+        total = max(self.min_walkers, self.walkers_per_dim * dim)
+        per = max(-(-total // self.n_groups), 2 * dim)
+        return per + per % 2
+
+
+@dataclass(frozen=True)
+class ParameterLayout:
+    """Where each parameter sits in theta."""
+
+    n_segments: int
+    infer_springs: bool
+    infer_load: bool
+
+    @property
+    def dim(self) -> int:
+        return self.n_segments + 2 * self.infer_springs + self.infer_load
+
+    @property
+    def springs(self) -> slice:
+        return slice(self.n_segments, self.n_segments + 2 * self.infer_springs)
+
+    @property
+    def load(self) -> int | None:
+        return self.dim - 1 if self.infer_load else None
+
+    def names(self) -> list[str]:
+        out = [f"EI_segments[{s}]" for s in range(self.n_segments)]
+        if self.infer_springs:
+            out += ["rotational_stiffness[0]", "rotational_stiffness[1]"]
+        if self.infer_load:
+            out.append("load_factor")
+        return out
+
+
+class GirderLogPosterior:
+    """log p(theta | y) up to a constant, sigma integrated out: log prior - (n/2) log RSS.
+
+    Call with theta shaped (W, dim); -inf outside the support (10 prior sd).
+    """
+
+    def __init__(
+        self,
+        model: GirderModalModel,
+        y: np.ndarray,
+        layout: ParameterLayout,
+        ei_prior: EIPrior,
+        k_prior: tuple[float, float] | None,
+        load_rel_sd: float | None,
+    ):
+        self.model, self.layout = model, layout
+        self.y = np.asarray(y, float)
+        self.n = self.y.size
+        S = layout.n_segments
+        loc = [ei_prior.loc] * S
+        sd = [ei_prior.log_sd] * S
+        if layout.infer_springs:
+            if k_prior is None:
+                raise InputError("prior.k_median", None, "a spring prior when springs are inferred")
+            loc += [math.log(k_prior[0])] * 2
+            sd += [k_prior[1]] * 2
+        if layout.infer_load:
+            if not load_rel_sd:
+                raise InputError("vehicle.load_rel_sd", load_rel_sd, "> 0 to infer the load factor")
+            loc.append(0.0)  # log load factor; its sd to first order
+            sd.append(load_rel_sd)
+        self.load_rel_sd = load_rel_sd
+        self.loc, self.sd = np.array(loc), np.array(sd)
+        self.lo = self.loc - SUPPORT_SD * self.sd
+        self.hi = self.loc + SUPPORT_SD * self.sd
+        if layout.infer_load:
+            self.lo[-1] = math.log(max(1.0 - SUPPORT_SD * load_rel_sd, 1e-3))
+            self.hi[-1] = math.log(1.0 + SUPPORT_SD * load_rel_sd)
+
+    def unpack(self, theta: np.ndarray):
+        """(EI (W, S), springs (W, 2) or None, load factor (W,) or None) of theta (W, dim)."""
+        lay = self.layout
+        theta = np.atleast_2d(theta)
+        EI = np.exp(theta[:, : lay.n_segments])
+        ks = np.exp(theta[:, lay.springs]) if lay.infer_springs else None
+        lf = np.exp(theta[:, lay.load]) if lay.infer_load else None
+        return EI, ks, lf
+
+    def log_prior(self, theta: np.ndarray) -> np.ndarray:
+        """Log prior density with respect to theta, up to a constant."""
+        theta = np.atleast_2d(theta)
+        z = (theta - self.loc) / self.sd
+        if not self.layout.infer_load:
+            return -0.5 * np.sum(z**2, axis=1)
+        ll = theta[:, -1]  # log load factor: N(1, sd) in the factor, times its Jacobian
+        out = -0.5 * np.sum(z[:, :-1] ** 2, axis=1)
+        return out - 0.5 * ((np.exp(ll) - 1.0) / self.load_rel_sd) ** 2 + ll
+
+    def predict(self, theta: np.ndarray) -> np.ndarray:
+        """Surrogate predictions (W, P), in batches of BATCH."""
+        theta = np.atleast_2d(theta)
+        out = np.empty((theta.shape[0], self.n))
+        for i in range(0, theta.shape[0], BATCH):
+            EI, ks, lf = self.unpack(theta[i : i + BATCH])
+            out[i : i + BATCH] = self.model.predict(EI, ks, lf)
+        return out
+
+    def rss(self, theta: np.ndarray) -> np.ndarray:
+        r = self.y[None, :] - self.predict(theta)
+        return np.einsum("wp,wp->w", r, r)
+
+    def inside(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.atleast_2d(theta)
+        return np.all((theta > self.lo) & (theta < self.hi), axis=1) & np.all(
+            np.isfinite(theta), axis=1
+        )
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.atleast_2d(theta)
+        out = np.full(theta.shape[0], -np.inf)
+        ok = self.inside(theta)
+        if ok.any():
+            out[ok] = self.log_prior(theta[ok]) - 0.5 * self.n * np.log(self.rss(theta[ok]))
+        return out
+
+
+# --------------------------------------------------------------------------------------------------
+# MAP, Laplace covariance, mode count
+
+
+def _neg_with_grad(post: GirderLogPosterior, h: float = 1e-6):
+    def fg(th: np.ndarray) -> tuple[float, np.ndarray]:
+        D = th.size
+        pts = np.vstack([th, th + h * np.eye(D), th - h * np.eye(D)])
+        v = -post(pts)
+        if not np.all(np.isfinite(v)):
+            return float(v[0]) if np.isfinite(v[0]) else 1e300, np.zeros(D)
+        return float(v[0]), (v[1 : D + 1] - v[D + 1 :]) / (2 * h)
+
+    return fg
+
+
+def find_map(post: GirderLogPosterior, starts: Sequence[np.ndarray] | None = None) -> np.ndarray:
+    """theta at the posterior maximum: a scan of a common log EI (other parameters at their prior
+    centres), then L-BFGS-B from there (and from each of `starts`; with springs inferred also from
+    springs 2 prior sd below and above their median); the best end point."""
+    lay = post.layout
+    S = lay.n_segments
+    base = post.loc.copy()
+    grid = post.loc[0] + post.sd[0] * np.linspace(-6.0, 6.0, 241)
+    pts = np.repeat(base[None], grid.size, axis=0)
+    pts[:, :S] = grid[:, None]
+    base[:S] = grid[int(np.argmax(post(pts)))]
+    cands = [base]
+    if lay.infer_springs:
+        for dz in (-2.0, 2.0):
+            c = base.copy()
+            c[lay.springs] += dz * post.sd[lay.springs]
+            cands.append(c)
+    cands += [np.asarray(s, float) for s in (starts or [])]
+    pad = 1e-3 * post.sd
+    bounds = list(zip(post.lo + pad, post.hi - pad, strict=True))
+    fg = _neg_with_grad(post)
+    best, best_f = None, np.inf
+    for c in cands:
+        c = np.clip(c, post.lo + pad, post.hi - pad)
+        res = minimize(
+            fg,
+            c,
+            jac=True,
+            method="L-BFGS-B",
+            bounds=bounds,
+            options={"maxiter": 500, "ftol": 1e-14, "gtol": 1e-8},
+        )
+        if res.fun < best_f:
+            best, best_f = np.asarray(res.x, float), float(res.fun)
+    return best
+
+
+def laplace_covariance(post: GirderLogPosterior, theta: np.ndarray, h: float = 1e-3) -> np.ndarray:
+    """Inverse Hessian of -log p at theta (central differences, one batch); eigenvalues of the
+    Hessian floored at the smallest prior precision."""
+    D = theta.size
+    E = h * np.eye(D)
+    pts = [theta]
+    for i in range(D):
+        pts += [theta + E[i], theta - E[i]]
+    for i in range(D):
+        for j in range(i + 1, D):
+            pts += [
+                theta + E[i] + E[j],
+                theta + E[i] - E[j],
+                theta - E[i] + E[j],
+                theta - E[i] - E[j],
+            ]
+    f = -post(np.array(pts))
+    f0 = f[0]
+    H = np.zeros((D, D))
+    k = 1
+    for i in range(D):
+        H[i, i] = (f[k] - 2 * f0 + f[k + 1]) / h**2
+        k += 2
+    for i in range(D):
+        for j in range(i + 1, D):
+            H[i, j] = H[j, i] = (f[k] - f[k + 1] - f[k + 2] + f[k + 3]) / (4 * h**2)
+            k += 4
+    if not np.all(np.isfinite(H)):
+        return np.diag(post.sd**2)
+    lam, V = np.linalg.eigh(0.5 * (H + H.T))
+    lam = np.maximum(lam, 1.0 / float(np.max(post.sd)) ** 2)
+    return (V / lam) @ V.T
+
+
+def _model(
+    template: Girder,
+    vehicle: Vehicle,
+    data: Measurements,
+    n_modes: int,
+    springs: bool,
+    n_elements: int,
+) -> GirderModalModel:
+    a_u, a_xx = data.weights
+    return GirderModalModel(
+        template,
+        vehicle,
+        data.x,
+        data.t,
+        a_u,
+        a_xx,
+        n_modes=n_modes,
+        infer_springs=springs,
+        n_elements=n_elements,
+    )
+
+
+def choose_girder_modes(
+    template: Girder,
+    vehicle: Vehicle,
+    data: Measurements,
+    post: GirderLogPosterior,
+    theta: np.ndarray,
+    sigma: float,
+    n_elements: int = 96,
+) -> tuple[int, float]:
+    """Smallest n in MODE_STEPS whose predictions at theta differ from 2 n modes by at most
+    TRUNCATION_FRACTION x sigma (or 1e-9 of the data RMS); returns (n, that largest difference)."""
+    scale = float(np.sqrt(np.mean(np.asarray(data.value, float) ** 2)))
+    tol = max(TRUNCATION_FRACTION * sigma, 1e-9 * scale)
+    EI, ks, lf = post.unpack(theta)
+    springs = post.layout.infer_springs
+    err = float("nan")
+    for n in MODE_STEPS:
+        p1 = _model(template, vehicle, data, n, springs, n_elements).predict(EI, ks, lf)
+        p2 = _model(template, vehicle, data, 2 * n, springs, n_elements).predict(EI, ks, lf)
+        err = float(np.max(np.abs(p1 - p2)))
+        if err <= tol:
+            return n, err
+    return MODE_STEPS[-1], err
+
+
+# --------------------------------------------------------------------------------------------------
+# emcee driver
+
+
+@dataclass
+class GirderChains:
+    """theta draws (group, draw, dim) with their log densities (group, draw), and run facts."""
+
+    theta: np.ndarray
+    lp: np.ndarray
+    tau: float
+    tau_per_parameter: np.ndarray
+    steps: int
+    burn: int
+    thin: int
+    walkers: int
+    acceptance: float
+
+
+def run_emcee(
+    log_prob,
+    center: np.ndarray,
+    cov: np.ndarray,
+    settings: GirderMCMCSettings | None = None,
+    seed: int | np.random.SeedSequence = 0,
+) -> GirderChains:
+    """Sample a vectorised log density (theta (W, D) -> (W,)) with `n_groups` independent emcee
+    ensembles started from N(center, start_scale^2 cov) (draws outside the support redrawn).
+    A function of the seed."""
+    import emcee
+
+    s = settings or GirderMCMCSettings()
+    center = np.asarray(center, float)
+    D = center.size
+    nw = s.walkers_per_group(D)
+    C = np.linalg.cholesky(np.atleast_2d(cov) + 1e-300 * np.eye(D))
+    samplers, states = [], []
+    for g in range(s.n_groups):
+        r = np.random.default_rng(seeding.child(seed, "emcee", g))
+        p0 = center + s.start_scale * r.standard_normal((nw, D)) @ C.T
+        for _ in range(200):
+            bad = ~np.isfinite(log_prob(p0))
+            if not bad.any():
+                break
+            p0[bad] = center + 0.5 * s.start_scale * r.standard_normal((int(bad.sum()), D)) @ C.T
+        else:
+            raise RuntimeError("could not start the walkers inside the posterior's support")
+        moves = None if s.moves == "stretch" else emcee.moves.DEMove()
+        sampler = emcee.EnsembleSampler(nw, D, log_prob, moves=moves, vectorize=True)
+        rs = np.random.RandomState(seeding.int_seed(seeding.child(seed, "emcee", 1000 + g)) % 2**32)
+        sampler.random_state = rs.get_state()
+        samplers.append(sampler)
+        states.append(p0)
+    logging.getLogger("emcee").setLevel(logging.ERROR)
+    steps, tau, tau_prev = 0, float("nan"), float("nan")
+    tau_dim = np.full(D, np.nan)
+    while True:
+        for i, sm in enumerate(samplers):
+            states[i] = sm.run_mcmc(states[i], s.chunk, progress=False)
+        steps += s.chunk
+        if steps < s.min_steps:
+            continue
+        per = np.array(
+            [
+                emcee.autocorr.integrated_time(sm.get_chain()[steps // 3 :], quiet=True)
+                for sm in samplers
+            ]
+        )
+        tau_dim = per.max(axis=0)
+        tau = float(tau_dim.max())
+        burn = int(math.ceil(s.burn_factor * tau))
+        long_enough = steps - burn >= s.tau_factor * tau
+        stable = math.isfinite(tau_prev) and abs(tau - tau_prev) <= s.tau_rtol * tau
+        if (long_enough and stable) or steps >= s.max_steps:
+            if not (long_enough and stable):
+                warnings.warn(
+                    f"girder MCMC stopped at max_steps={s.max_steps} with tau={tau:.1f} "
+                    f"(needs {s.tau_factor:g} tau after burn-in, tau stable to {s.tau_rtol:g})",
+                    RuntimeWarning,
+                    stacklevel=3,
+                )
+            break
+        tau_prev = tau
+    burn = min(int(math.ceil(s.burn_factor * tau)), steps // 2)
+    thin = max(1, int(tau / 4))
+
+    def grouped(a: np.ndarray) -> np.ndarray:  # (step, walker, ...) -> (walker * step, ...)
+        return np.swapaxes(a, 0, 1).reshape((-1,) + a.shape[2:])
+
+    theta = np.stack([grouped(sm.get_chain(discard=burn, thin=thin)) for sm in samplers])
+    lp = np.stack([grouped(sm.get_log_prob(discard=burn, thin=thin)) for sm in samplers])
+    acc = float(np.mean([sm.acceptance_fraction.mean() for sm in samplers]))
+    return GirderChains(theta, lp, tau, tau_dim, steps, burn, thin, nw * s.n_groups, acc)
+
+
+# --------------------------------------------------------------------------------------------------
+# result
+
+
+@dataclass
+class GirderPosterior:
+    """Posterior draws of a girder's parameters, each shaped (chain, draw) with one chain per
+    independent walker group.
+
+    Attributes
+    ----------
+    EI_segments : array (chain, draw, S), segment EI [N m^2], left to right
+    rotational_stiffness : array (chain, draw, 2) [N m/rad] (left, right), or None (pinned analysis)
+    load_factor : array (chain, draw), or None (not inferred)
+    sigma : array (chain, draw), noise sd (units of the data)
+    edges : array (S + 1,), segment boundaries [m]
+    EI_nominal : design EI [N m^2] that damage is judged against
+    diagnostics : worst-case rhat / ess_bulk / ess_tail, `per_parameter`, converged, tau, steps, ...
+    info : MAP, Laplace sds, priors
+    runtime_s : wall time [s]
+    """
+
+    EI_segments: np.ndarray
+    rotational_stiffness: np.ndarray | None
+    load_factor: np.ndarray | None
+    sigma: np.ndarray
+    edges: np.ndarray
+    EI_nominal: float
+    diagnostics: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
+    runtime_s: float = 0.0
+    method: str = "modal_mcmc"
+
+    @property
+    def n_segments(self) -> int:
+        return int(self.EI_segments.shape[-1])
+
+    @property
+    def EI(self) -> np.ndarray:
+        """Span-averaged EI L / integral dx / EI = S / sum_s 1 / EI_s, (chain, draw)."""
+        return self.n_segments / np.sum(1.0 / self.EI_segments, axis=-1)
+
+    @property
+    def p_damaged(self) -> np.ndarray:
+        """(S,): posterior probability that EI_s < DAMAGE_FRACTION x EI_nominal."""
+        thr = DAMAGE_FRACTION * self.EI_nominal
+        return np.mean(self.EI_segments.reshape(-1, self.n_segments) < thr, axis=0)
+
+    def draws(self) -> dict[str, np.ndarray]:
+        """Every reported quantity by its diagnostic name, each (chain, draw)."""
+        out = {f"EI_segments[{s}]": self.EI_segments[..., s] for s in range(self.n_segments)}
+        if self.rotational_stiffness is not None:
+            out["rotational_stiffness[0]"] = self.rotational_stiffness[..., 0]
+            out["rotational_stiffness[1]"] = self.rotational_stiffness[..., 1]
+        if self.load_factor is not None:
+            out["load_factor"] = self.load_factor
+        out["EI"] = self.EI
+        out["sigma"] = self.sigma
+        return out
+
+    def interval(self, name: str = "EI", level: float = 0.9) -> tuple[float, float]:
+        """Equal-tailed credible interval of a quantity named as in `draws()`."""
+        a = (1.0 - level) / 2.0
+        lo, hi = np.quantile(self.draws()[name].ravel(), [a, 1.0 - a])
+        return float(lo), float(hi)
+
+    def summary(self, truth: dict | None = None) -> dict:
+        """The method's summary entry (contract keys): EI, EI_segments (x0, x1, p_damaged and the
+        fields of `summarise`), rotational_stiffness [left, right] when inferred, load_factor when
+        inferred, sigma, EI_nominal, diagnostics, runtime_s. `truth` (e.g. `girder_truth`) may hold
+        EI, EI_segments, rotational_stiffness and load_factor; matching entries get rel_error_pct."""
+        t = _check_truth(truth, self.n_segments)
+        out: dict[str, Any] = {"EI": summarise(self.EI, t.get("EI"))}
+        seg_truth = t.get("EI_segments") or [None] * self.n_segments
+        pd = self.p_damaged
+        segs = []
+        for s in range(self.n_segments):
+            e = {"x0": float(self.edges[s]), "x1": float(self.edges[s + 1])}
+            e.update(summarise(self.EI_segments[..., s], seg_truth[s]))
+            e["p_damaged"] = float(pd[s])
+            segs.append(e)
+        out["EI_segments"] = segs
+        if self.rotational_stiffness is not None:
+            kt = t.get("rotational_stiffness") or [None, None]
+            out["rotational_stiffness"] = [
+                summarise(self.rotational_stiffness[..., i], kt[i] if _finite(kt[i]) else None)
+                for i in range(2)
+            ]
+        if self.load_factor is not None:
+            out["load_factor"] = summarise(self.load_factor, t.get("load_factor"))
+        out["sigma"] = summarise(self.sigma)
+        out["EI_nominal"] = float(self.EI_nominal)
+        out["diagnostics"] = jsonable(self.diagnostics)
+        out.update(jsonable(self.info))
+        out["runtime_s"] = float(self.runtime_s)
+        return out
+
+
+def _finite(v: Any) -> bool:
+    return v is not None and math.isfinite(float(v))
+
+
+def _check_truth(truth: dict | None, S: int) -> dict:
+    if truth is None:
+        return {}
+    if not isinstance(truth, dict):
+        raise InputError("truth", truth, "a dict of true values")
+    out = dict(truth)
+    if truth.get("EI") is not None:
+        out["EI"] = _check_number("truth.EI", truth["EI"], positive=True)
+    if truth.get("EI_segments") is not None:
+        seg = list(truth["EI_segments"])
+        if len(seg) != S:
+            raise InputError("truth.EI_segments", seg, f"{S} values (one per analysis segment)")
+        out["EI_segments"] = [
+            _check_number(f"truth.EI_segments[{i}]", v, positive=True) for i, v in enumerate(seg)
+        ]
+    if truth.get("rotational_stiffness") is not None:
+        ks = list(truth["rotational_stiffness"])
+        if len(ks) != 2:
+            raise InputError("truth.rotational_stiffness", ks, "two values (left, right)")
+        for i, k in enumerate(ks):
+            if (
+                isinstance(k, bool)
+                or not isinstance(k, int | float | np.integer | np.floating)
+                or not (float(k) >= 0)
+            ):
+                raise InputError(
+                    f"truth.rotational_stiffness[{i}]", k, "a number >= 0 N m/rad, or inf"
+                )
+        out["rotational_stiffness"] = [float(k) for k in ks]
+    if truth.get("load_factor") is not None:
+        out["load_factor"] = _check_number("truth.load_factor", truth["load_factor"], positive=True)
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# entry point
+
+
+def _geometry(girder: Girder | Beam) -> tuple[float, float, float, float]:
+    if isinstance(girder, Girder | Beam):
+        return girder.length, girder.mass_per_length, girder.section_depth, girder.damping_ratio
+    raise InputError("girder", girder, "a Girder or a Beam (the span's geometry)")
+
+
+def _check_segments(S: Any, n_data: int) -> int:
+    if isinstance(S, bool) or not isinstance(S, int | np.integer) or S < 1:
+        raise InputError("model.EI_segments", S, "an integer >= 1")
+    if S > n_data:
+        raise InputError("model.EI_segments", S, f"at most the number of data points ({n_data})")
+    return int(S)
+
+
+def girder_posterior(
+    data: Measurements,
+    girder: Girder | Beam,
+    vehicle: Vehicle,
+    *,
+    ei_prior: EIPrior,
+    EI_segments: int = 1,
+    supports: str = "pinned",
+    load_factor: str = "auto",
+    load_rel_sd: float = 0.0,
+    k_median: float = 1.0e8,
+    k_log_sd: float = 2.0,
+    EI_nominal: float | None = None,
+    seed: int | np.random.SeedSequence = 0,
+    settings: GirderMCMCSettings | None = None,
+    n_elements: int = 96,
+) -> GirderPosterior:
+    """Sample the reference posterior of a girder's segment EI (and bearing springs, load factor).
+
+    Parameters
+    ----------
+    data : measurements of one kind (deflection or strain: one noise sd).
+    girder : the span's geometry (length, mass per length, depth, damping); its EI and springs are
+        not used (a config `Beam` works too).
+    vehicle : the stated axles.
+    ei_prior : log-normal prior of each segment's EI.
+    EI_segments : n equal segments from the left support ([model] EI_segments).
+    supports : "pinned", or "springs" (a rotational spring inferred at each support).
+    load_factor : "auto" (infer a common axle-load factor when load_rel_sd > 0) or "off".
+    load_rel_sd : relative sd of the axle loads around the stated ones ([vehicle] load_rel_sd).
+    k_median, k_log_sd : log-normal spring prior [N m/rad] ([prior] k_median, k_log_sd).
+    EI_nominal : design EI that damage is judged against (default: the prior median).
+    seed : root seed (walker starts and moves: "emcee" stream; sigma draws: "noise").
+    settings : run-length rules.
+    n_elements : FE elements of the surrogate.
+
+    Returns
+    -------
+    GirderPosterior: draws (chain = independent walker group, draw), diagnostics per parameter,
+    MAP and Laplace information; a function of the seed.
+    """
+    t0 = time.perf_counter()
+    if not isinstance(data, Measurements):
+        raise InputError("data", data, "a Measurements set")
+    L, mu, depth, zeta = _geometry(girder)
+    if not isinstance(vehicle, Vehicle):
+        raise InputError("vehicle", vehicle, "a Vehicle")
+    if not isinstance(ei_prior, EIPrior):
+        raise InputError("prior", ei_prior, "an EIPrior")
+    S = _check_segments(EI_segments, len(data))
+    if supports not in SUPPORTS:
+        raise InputError("model.supports", supports, "'pinned' or 'springs'")
+    if load_factor not in LOAD_FACTOR_MODES:
+        raise InputError("model.load_factor", load_factor, "'auto' or 'off'")
+    load_rel_sd = check_load_rel_sd(load_rel_sd)
+    k_median = _check_number("prior.k_median", k_median, positive=True)
+    k_log_sd = _check_number("prior.k_log_sd", k_log_sd, positive=True)
+    nominal = ei_prior.median if EI_nominal is None else EI_nominal
+    nominal = _check_number("model.EI_nominal", nominal, positive=True)
+    if len(set(np.asarray(data.kind).tolist())) != 1:
+        raise InputError("data.kind", sorted(set(data.kind.tolist())), "one kind (one noise sd)")
+    settings = settings or GirderMCMCSettings()
+    infer_springs = supports == "springs"
+    infer_load = load_factor == "auto" and load_rel_sd > 0
+    lay = ParameterLayout(S, infer_springs, infer_load)
+    k_prior = (k_median, k_log_sd) if infer_springs else None
+    lf_sd = load_rel_sd if infer_load else None
+    y = np.asarray(data.value, float)
+    if not np.all(np.isfinite(y)) or not np.any(y != 0):
+        raise InputError(
+            "data.value", "all zero or non-finite", "finite measurements, not all zero"
+        )
+
+    def template(EI: Sequence[float], ks: Sequence[float]) -> Girder:
+        return Girder(
+            L,
+            tuple(float(e) for e in EI),
+            mu,
+            depth,
+            damping_ratio=zeta,
+            rotational_stiffness=tuple(float(k) for k in ks) if infer_springs else (0.0, 0.0),
+        )
+
+    def build(tmpl: Girder, n_modes: int) -> GirderLogPosterior:
+        m = _model(tmpl, vehicle, data, n_modes, infer_springs, n_elements)
+        return GirderLogPosterior(m, y, lay, ei_prior, k_prior, lf_sd)
+
+    # MAP on a surrogate referenced at the prior centre, then re-referenced at the MAP
+    tmpl = template([ei_prior.median] * S, [k_median, k_median])
+    post = build(tmpl, MODE_STEPS[0])
+    theta = find_map(post)
+    EI_m, ks_m, _ = post.unpack(theta)
+    tmpl = template(EI_m[0], ks_m[0] if ks_m is not None else (0.0, 0.0))
+    post = build(tmpl, MODE_STEPS[0])
+    sigma_map = math.sqrt(float(post.rss(theta)[0]) / post.n)
+    n_modes, trunc = choose_girder_modes(tmpl, vehicle, data, post, theta, sigma_map, n_elements)
+    post = build(tmpl, n_modes)
+    theta = find_map(post, starts=[theta])
+    cov = laplace_covariance(post, theta)
+    sigma_map = math.sqrt(float(post.rss(theta)[0]) / post.n)
+    t_map = time.perf_counter() - t0
+
+    ch = run_emcee(post, theta, cov, settings, seed)
+    th = ch.theta
+    EI_seg = np.exp(th[..., :S])
+    ks = np.exp(th[..., lay.springs]) if infer_springs else None
+    lf = np.exp(th[..., lay.load]) if infer_load else None
+    # RSS from the stored log density: lp = log prior - (n/2) log RSS
+    flat = th.reshape(-1, lay.dim)
+    log_rss = (post.log_prior(flat) - ch.lp.ravel()) * (2.0 / post.n)
+    g = np.random.default_rng(seeding.stream(seed, "noise")).gamma(
+        post.n / 2.0, 1.0, size=flat.shape[0]
+    )
+    noise_prior = NoisePrior.build("vague", y)
+    sig = np.sqrt(np.exp(log_rss) / (2.0 * g)).reshape(ch.lp.shape)
+    sig = np.clip(sig, noise_prior.low, noise_prior.high)
+
+    result = GirderPosterior(
+        EI_segments=EI_seg,
+        rotational_stiffness=ks,
+        load_factor=lf,
+        sigma=sig,
+        edges=np.linspace(0.0, L, S + 1),
+        EI_nominal=nominal,
+    )
+    per = {name: mcmc_diagnostics(d) for name, d in result.draws().items()}
+    rhat = max(v["rhat"] for v in per.values())
+    ess_b = min(v["ess_bulk"] for v in per.values())
+    ess_t = min(v["ess_tail"] for v in per.values())
+    converged = bool(
+        all(
+            v["rhat"] <= RHAT_MAX and v["ess_bulk"] >= ESS_MIN and v["ess_tail"] >= ESS_MIN
+            for v in per.values()
+        )
+    )
+    if not converged:
+        warnings.warn(
+            f"girder MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN} for every "
+            f"parameter: {per}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    result.diagnostics = {
+        "rhat": rhat,
+        "ess_bulk": ess_b,
+        "ess_tail": ess_t,
+        "converged": converged,
+        "per_parameter": per,
+        "tau": ch.tau,
+        "tau_per_parameter": dict(
+            zip([f"log {n}" for n in lay.names()], ch.tau_per_parameter.tolist(), strict=True)
+        ),
+        "steps": ch.steps,
+        "burn": ch.burn,
+        "thin": ch.thin,
+        "walkers": ch.walkers,
+        "groups": settings.n_groups,
+        "acceptance": ch.acceptance,
+        "n_modes": n_modes,
+        "truncation_error": trunc,
+        "noise_prior": noise_prior.describe(),
+        "scheme": "emcee on theta with sigma marginalised; exact inverse-gamma sigma draws",
+    }
+    EI_map, ks_map, lf_map = post.unpack(theta)
+    map_info: dict[str, Any] = {"EI_segments": EI_map[0].tolist(), "sigma": sigma_map}
+    if infer_springs:
+        map_info["rotational_stiffness"] = ks_map[0].tolist()
+    if infer_load:
+        map_info["load_factor"] = float(lf_map[0])
+    result.info = {
+        "map": map_info,
+        "laplace_sd": dict(
+            zip([f"log {n}" for n in lay.names()], np.sqrt(np.diag(cov)).tolist(), strict=True)
+        ),
+        "model": {
+            "EI_segments": S,
+            "supports": supports,
+            "load_factor": "inferred" if infer_load else "fixed at 1",
+        },
+        "prior": {
+            "EI_median": ei_prior.median,
+            "EI_log_sd": ei_prior.log_sd,
+            **({"k_median": k_median, "k_log_sd": k_log_sd} if infer_springs else {}),
+            **({"load_rel_sd": load_rel_sd} if infer_load else {}),
+        },
+        "map_time_s": t_map,
+    }
+    result.runtime_s = time.perf_counter() - t0
+    return result
