@@ -18,6 +18,11 @@ import numpy as np
 from .errors import InputError
 
 CASES = ("deflection", "strain")
+SUPPORTS = ("pinned", "springs")
+LOAD_FACTOR = ("auto", "off")
+NOISE_MODELS = ("iid", "ar1")
+#: the largest relative sd of the axle loads: beyond it a normal load factor would go negative too often
+MAX_LOAD_REL_SD = 0.2
 
 #: Exeter bascule girder (paper Table 3): E = 205 GPa, I = 50.42e8 mm^4.
 EXETER_EI = 205e9 * 50.42e8 * 1e-12  # = 1.03361e9 N m^2
@@ -49,17 +54,41 @@ def _check_int(name: str, value: Any, minimum: int) -> int:
     return int(value)
 
 
+def equivalent_ei(profile) -> float:
+    """The span-averaged flexibility's equivalent of EI over equal segments: n / sum(1 / EI_i) [N m^2]."""
+    p = np.asarray(profile, float)
+    return float(p.size / np.sum(1.0 / p))
+
+
+def _spring(name: str, value: Any) -> float:
+    if isinstance(value, str):
+        if value.strip().lower() == "fixed":
+            return math.inf
+        raise InputError(name, value, "a number of N m/rad >= 0 or 'fixed'")
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise InputError(name, value, "a number of N m/rad >= 0 or 'fixed'")
+    v = float(value)
+    if math.isnan(v) or v < 0:
+        raise InputError(name, value, "a number of N m/rad >= 0 or 'fixed'")
+    return v
+
+
 @dataclass(frozen=True)
 class Beam:
-    """A simply supported Euler-Bernoulli girder.
+    """An Euler-Bernoulli girder: simply supported and uniform by default.
 
     Attributes
     ----------
     length : float, span L [m]
-    EI : float, flexural rigidity [N m^2] (the truth for synthetic data)
+    EI : float, flexural rigidity [N m^2] (the truth for synthetic data). Given as a list, EI per equal
+        segment from the left support: it is then kept in `EI_profile`, and EI itself is the span-averaged
+        flexibility's equivalent n / sum(1 / EI_i)
     mass_per_length : float, mu [kg/m]
     section_depth : float, overall depth [m]; flange fibres sit at y = -depth/2 (top), +depth/2 (bottom)
     damping_ratio : float, modal damping ratio zeta [-], 0 by default as in the paper
+    rotational_stiffness : (left, right) rotational spring at each support [N m/rad]; 0 = pin (default),
+        math.inf (TOML "fixed") = clamped
+    EI_profile : tuple of segment EIs [N m^2], empty for a uniform girder (set through `EI`)
     """
 
     length: float = 17.28
@@ -67,19 +96,65 @@ class Beam:
     mass_per_length: float = 289.0
     section_depth: float = 0.9266
     damping_ratio: float = 0.0
+    rotational_stiffness: tuple[float, float] = (0.0, 0.0)
+    EI_profile: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        for name in ("length", "EI", "mass_per_length", "section_depth"):
+        for name in ("length", "mass_per_length", "section_depth"):
             object.__setattr__(
                 self, name, _check_number(f"beam.{name}", getattr(self, name), positive=True)
             )
+        ei = self.EI
+        if isinstance(ei, list | tuple | np.ndarray):
+            if len(ei) < 1:
+                raise InputError("beam.EI", list(ei), "a number > 0 or a non-empty list of them")
+            prof = tuple(_check_number(f"beam.EI[{i}]", v, positive=True) for i, v in enumerate(ei))
+            object.__setattr__(self, "EI_profile", () if len(prof) == 1 else prof)
+            object.__setattr__(self, "EI", prof[0] if len(prof) == 1 else equivalent_ei(prof))
+        else:
+            v = _check_number("beam.EI", ei, positive=True)
+            prof = tuple(
+                _check_number(f"beam.EI[{i}]", p, positive=True)
+                for i, p in enumerate(self.EI_profile)
+            )
+            if len(prof) == 1:
+                prof = ()
+            if prof and not math.isclose(v, equivalent_ei(prof), rel_tol=1e-12):
+                raise InputError(
+                    "beam.EI",
+                    ei,
+                    f"the segments' equivalent {equivalent_ei(prof):.6g} (a girder with EI per segment "
+                    "takes a list for EI)",
+                )
+            object.__setattr__(self, "EI", v)
+            object.__setattr__(self, "EI_profile", prof)
         z = _check_number("beam.damping_ratio", self.damping_ratio, nonneg=True)
         if z >= 1:
             raise InputError("beam.damping_ratio", self.damping_ratio, "a number in [0, 1)")
         object.__setattr__(self, "damping_ratio", z)
+        k = self.rotational_stiffness
+        if isinstance(k, str) or not isinstance(k, list | tuple) or len(k) != 2:
+            raise InputError(
+                "beam.rotational_stiffness", k, "a list [left, right] of N m/rad >= 0 or 'fixed'"
+            )
+        object.__setattr__(
+            self,
+            "rotational_stiffness",
+            tuple(_spring(f"beam.rotational_stiffness[{i}]", v) for i, v in enumerate(k)),
+        )
+
+    @property
+    def segments(self) -> tuple[float, ...]:
+        """EI per equal segment [N m^2] (one value for a uniform girder)."""
+        return self.EI_profile or (self.EI,)
+
+    @property
+    def ideal(self) -> bool:
+        """Uniform EI and pinned supports: the girder the closed-form modal model and the PINN describe."""
+        return not self.EI_profile and self.rotational_stiffness == (0.0, 0.0)
 
     def natural_frequency(self, n: int = 1, EI: float | None = None) -> float:
-        """Circular natural frequency of mode n [rad/s]."""
+        """Circular natural frequency of mode n [rad/s] (of the uniform, pinned girder)."""
         ei = self.EI if EI is None else EI
         return (n * math.pi / self.length) ** 2 * math.sqrt(ei / self.mass_per_length)
 
@@ -106,9 +181,17 @@ class Vehicle:
 
     speed: float = EXETER_SPEED
     axles: tuple[Axle, ...] = (Axle(37000.0, 0.0),)
+    #: relative sd of the true axle loads around the stated ones (one common factor); 0 = known exactly
+    load_rel_sd: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "speed", _check_number("vehicle.speed", self.speed, positive=True))
+        r = _check_number("vehicle.load_rel_sd", self.load_rel_sd, nonneg=True)
+        if r > MAX_LOAD_REL_SD:
+            raise InputError(
+                "vehicle.load_rel_sd", self.load_rel_sd, f"a number in [0, {MAX_LOAD_REL_SD}]"
+            )
+        object.__setattr__(self, "load_rel_sd", r)
         axles = tuple(self.axles)
         if not axles:
             raise InputError("vehicle.axles", list(axles), "at least one axle")
@@ -157,8 +240,14 @@ class DataSpec:
     n_points: int = 100
     sample_rate: float = 200.0
     sensors: tuple[Sensor, ...] = ()
+    #: AR(1) coefficient of the simulated noise between consecutive samples of one sensor (0: white)
+    noise_ar1: float = 0.0
 
     def __post_init__(self) -> None:
+        a = _check_number("data.noise_ar1", self.noise_ar1)
+        if not -1.0 < a < 1.0:
+            raise InputError("data.noise_ar1", self.noise_ar1, "a number in (-1, 1)")
+        object.__setattr__(self, "noise_ar1", a)
         object.__setattr__(self, "n_points", _check_int("data.n_points", self.n_points, 2))
         object.__setattr__(
             self, "sample_rate", _check_number("data.sample_rate", self.sample_rate, positive=True)
@@ -168,10 +257,13 @@ class DataSpec:
 
 @dataclass(frozen=True)
 class PriorSpec:
-    """Log-normal prior on EI: median [N m^2] and sd of log(EI)."""
+    """Log-normal prior on EI: median [N m^2] and sd of log(EI); on each support's rotational stiffness:
+    median [N m/rad] and sd of its log (with `model.supports = "springs"`)."""
 
     EI_median: float = 1.0e9
     EI_log_sd: float = 0.5
+    k_median: float = 1.0e8
+    k_log_sd: float = 2.0
 
     def __post_init__(self) -> None:
         object.__setattr__(
@@ -180,6 +272,53 @@ class PriorSpec:
         object.__setattr__(
             self, "EI_log_sd", _check_number("prior.EI_log_sd", self.EI_log_sd, positive=True)
         )
+        for name in ("k_median", "k_log_sd"):
+            object.__setattr__(
+                self, name, _check_number(f"prior.{name}", getattr(self, name), positive=True)
+            )
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What the analysis infers, independent of the truth that `simulate` used.
+
+    EI_segments : EI inferred per segment, n equal segments from the left support (1 = uniform EI)
+    supports : "pinned", or "springs": a rotational stiffness at each support inferred
+    load_factor : "auto" (infer a common axle-load factor when vehicle.load_rel_sd > 0) or "off"
+    EI_nominal : the design EI [N m^2] that damage is judged against (None: the prior's EI_median)
+    noise : "iid" (white Gaussian noise) or "ar1" (AR(1) per sensor series; its coefficient inferred)
+    """
+
+    EI_segments: int = 1
+    supports: str = "pinned"
+    load_factor: str = "auto"
+    EI_nominal: float | None = None
+    noise: str = "iid"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(
+            self, "EI_segments", _check_int("model.EI_segments", self.EI_segments, 1)
+        )
+        for name, allowed in (
+            ("supports", SUPPORTS),
+            ("load_factor", LOAD_FACTOR),
+            ("noise", NOISE_MODELS),
+        ):
+            if getattr(self, name) not in allowed:
+                raise InputError(
+                    f"model.{name}", getattr(self, name), "one of " + ", ".join(map(repr, allowed))
+                )
+        if self.EI_nominal is not None:
+            object.__setattr__(
+                self,
+                "EI_nominal",
+                _check_number("model.EI_nominal", self.EI_nominal, positive=True),
+            )
+
+    @property
+    def ideal(self) -> bool:
+        """Uniform EI, pinned supports, i.i.d. noise: the model every method describes."""
+        return self.EI_segments == 1 and self.supports == "pinned" and self.noise == "iid"
 
 
 @dataclass(frozen=True)
@@ -191,6 +330,7 @@ class Config:
     vehicle: Vehicle = field(default_factory=Vehicle)
     data: DataSpec = field(default_factory=DataSpec)
     prior: PriorSpec = field(default_factory=PriorSpec)
+    model: ModelSpec = field(default_factory=ModelSpec)
 
     def __post_init__(self) -> None:
         if self.case not in CASES:
@@ -200,6 +340,38 @@ class Config:
                 raise InputError(
                     f"data.sensors {s.name}.x", s.x, f"a position in [0, {self.beam.length}] m"
                 )
+
+    @property
+    def infers_load_factor(self) -> bool:
+        """Whether the analysis infers a common axle-load factor (`model.load_factor`)."""
+        return self.model.load_factor == "auto" and self.vehicle.load_rel_sd > 0
+
+    @property
+    def ideal(self) -> bool:
+        """The analysis model is a uniform, pinned girder under known loads with white noise."""
+        return self.model.ideal and not self.infers_load_factor
+
+    def identity(self) -> dict:
+        """`dataclasses.asdict` of this configuration without the real-girder and noise fields at their
+        defaults: what a configuration of the uniform, pinned, known-load, white-noise model was before
+        those fields existed, so that fingerprints of studies made then still match."""
+        from dataclasses import asdict
+
+        d = asdict(self)
+        if d["beam"]["rotational_stiffness"] == (0.0, 0.0):
+            del d["beam"]["rotational_stiffness"]
+        if not d["beam"]["EI_profile"]:
+            del d["beam"]["EI_profile"]
+        if d["vehicle"]["load_rel_sd"] == 0.0:
+            del d["vehicle"]["load_rel_sd"]
+        if d["data"]["noise_ar1"] == 0.0:
+            del d["data"]["noise_ar1"]
+        for k, default in (("k_median", 1.0e8), ("k_log_sd", 2.0)):
+            if d["prior"][k] == default:
+                del d["prior"][k]
+        if self.model == ModelSpec():
+            del d["model"]
+        return d
 
     @property
     def duration(self) -> float:
@@ -223,17 +395,30 @@ class Config:
         """Plain-dict form for manifests (SI units)."""
         return {
             "case": self.case,
-            "beam": {f.name: getattr(self.beam, f.name) for f in fields(Beam)},
+            "beam": {
+                **{
+                    f.name: getattr(self.beam, f.name)
+                    for f in fields(Beam)
+                    if f.name not in ("EI_profile", "rotational_stiffness")
+                },
+                "EI_segments": list(self.beam.segments),
+                "rotational_stiffness": [
+                    "fixed" if math.isinf(k) else k for k in self.beam.rotational_stiffness
+                ],
+            },
             "vehicle": {
                 "speed": self.vehicle.speed,
                 "axles": [{"load": a.load, "offset": a.offset} for a in self.vehicle.axles],
+                "load_rel_sd": self.vehicle.load_rel_sd,
             },
             "data": {
                 "n_points": self.data.n_points,
                 "sample_rate": self.data.sample_rate,
                 "sensors": [{"name": s.name, "x": s.x, "y": s.y} for s in self.sensors],
+                "noise_ar1": self.data.noise_ar1,
             },
-            "prior": {"EI_median": self.prior.EI_median, "EI_log_sd": self.prior.EI_log_sd},
+            "prior": {f.name: getattr(self.prior, f.name) for f in fields(PriorSpec)},
+            "model": {f.name: getattr(self.model, f.name) for f in fields(ModelSpec)},
         }
 
 
@@ -255,10 +440,11 @@ def preset(case: str = "deflection") -> Config:
 
 
 _SECTIONS = {
-    "beam": {f.name for f in fields(Beam)},
-    "vehicle": {"speed", "axles"},
-    "data": {"n_points", "sample_rate", "sensors"},
+    "beam": {f.name for f in fields(Beam)} - {"EI_profile"},
+    "vehicle": {"speed", "axles", "load_rel_sd"},
+    "data": {"n_points", "sample_rate", "sensors", "noise_ar1"},
     "prior": {f.name for f in fields(PriorSpec)},
+    "model": {f.name for f in fields(ModelSpec)},
 }
 
 
@@ -357,7 +543,8 @@ def resolve(case: str = "deflection", toml: str | Path | dict | None = None) -> 
         data_t["sensors"] = _sensors(data_t["sensors"])
     data = _build(DataSpec, "data", cfg.data, data_t)
     prior = _build(PriorSpec, "prior", cfg.prior, _table(doc, "prior"))
-    return Config(case=case, beam=beam, vehicle=vehicle, data=data, prior=prior)
+    model = _build(ModelSpec, "model", cfg.model, _table(doc, "model"))
+    return Config(case=case, beam=beam, vehicle=vehicle, data=data, prior=prior, model=model)
 
 
 def parse_snr(value: str | float | None, field_name: str = "--snr") -> float | None:

@@ -126,7 +126,33 @@ def load_data(
         return data, None
     data = simulate(cfg, snr_db, seed)
     sigma = sigma_for_snr(data.value_true, snr_db)
-    return data, {"EI": cfg.beam.EI, "sigma": sigma}
+    return data, {**true_values_of(cfg, seed), "sigma": sigma}
+
+
+def true_values_of(cfg: Config, seed) -> dict:
+    """The synthetic truth in the contract's keys: EI (for EI per segment, the span-averaged flexibility's
+    equivalent), and for the analysis model's extra parameters EI_segments (per analysis segment),
+    rotational_stiffness [left, right] and load_factor."""
+    out: dict = {"EI": cfg.beam.EI}
+    if cfg.ideal and cfg.beam.ideal and cfg.vehicle.load_rel_sd == 0:
+        return out
+    from .data.girder_data import girder_truth
+    from .data.synthetic import true_load_factor
+    from .physics.girder import Girder
+
+    b = cfg.beam
+    girder = Girder(
+        b.length, b.segments, b.mass_per_length, b.section_depth, b.damping_ratio,
+        b.rotational_stiffness,
+    )  # fmt: skip
+    t = girder_truth(girder, cfg.model.EI_segments, true_load_factor(cfg, seed))
+    if cfg.model.EI_segments > 1:
+        out["EI_segments"] = t["EI_segments"]
+    if cfg.model.supports == "springs":
+        out["rotational_stiffness"] = t["rotational_stiffness"]
+    if cfg.vehicle.load_rel_sd > 0:  # a truth of the data, whether or not the analysis infers it
+        out["load_factor"] = t["load_factor"]
+    return out
 
 
 @contextmanager
@@ -196,6 +222,8 @@ def analyse(
     synthetic = vt is not None and bool(np.all(np.isfinite(vt))) and bool(np.any(vt))
     if truth is not None and "sigma" not in truth and snr_db is not None and synthetic:
         truth = {**truth, "sigma": sigma_for_snr(vt, snr_db)}  # the noise level simulate used
+    for m in chosen:  # every method's refusal before any of them runs
+        m.check(data, cfg)
     for w in unit_warnings(data):
         log.warning("warning: %s", w)
     posts: dict[str, Posterior] = {}

@@ -6,6 +6,8 @@ SNR (dB) = 10 log10(mean(value_true^2) / sigma^2), over all samples of the file;
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .. import seeding
@@ -54,10 +56,57 @@ def sample_layout(cfg: Config, seed: int | np.random.SeedSequence) -> Measuremen
     return Measurements(x, t, z, kind.astype(str), y, sensor.astype(str), z.copy())
 
 
-def true_values(cfg: Config, layout: Measurements, fe: FESettings | None = None) -> np.ndarray:
-    """Noise-free values at the layout's points from the finite-element reference."""
+def true_load_factor(cfg: Config, seed: int | np.random.SeedSequence = 0) -> float:
+    """The crossing's true common axle-load factor: 1 with exactly known loads, else a draw with relative sd
+    `vehicle.load_rel_sd` (`girder_data.draw_load_factor`), a function of the seed."""
+    if cfg.vehicle.load_rel_sd == 0.0:
+        return 1.0
+    from .girder_data import draw_load_factor
+
+    return draw_load_factor(cfg.vehicle.load_rel_sd, seed)
+
+
+def true_values(
+    cfg: Config, layout: Measurements, fe: FESettings | None = None, load_factor: float = 1.0
+) -> np.ndarray:
+    """Noise-free values at the layout's points from the finite-element reference: the uniform pinned
+    girder's (`physics.fem`), or for EI per segment or springs at the supports the real girder's
+    (`physics.girder`, the same elements and steps); every axle load times `load_factor`."""
     a_u, a_xx = layout.weights
-    return fe_response(cfg.beam, cfg.vehicle, layout.x, layout.t, a_u, a_xx, fe)
+    fe = fe or FESettings()
+    if cfg.beam.ideal and load_factor == 1.0:
+        return fe_response(cfg.beam, cfg.vehicle, layout.x, layout.t, a_u, a_xx, fe)
+    from ..physics.girder import Girder, GirderFE
+
+    b = cfg.beam
+    girder = Girder(
+        b.length, b.segments, b.mass_per_length, b.section_depth, b.damping_ratio,
+        b.rotational_stiffness,
+    )  # fmt: skip
+    t = np.asarray(layout.t, float)
+    t_end = max(cfg.duration, float(t.max()))
+    resp = GirderFE(girder, fe.n_elements).solve(cfg.vehicle, t_end, fe.n_steps, load_factor)
+    return resp.sample(layout.x, t, a_u, a_xx)
+
+
+def ar1_noise(z: np.ndarray, layout: Measurements, phi: float) -> np.ndarray:
+    """Unit-variance AR(1) noise from i.i.d. standard normals z: e_k = phi e_(k-1) + sqrt(1 - phi^2) z_k along
+    each sensor's series in time order (strain gauges), or along all points in time order (scattered
+    deflection points: one instrument read at increasing times). Stationary from the first sample."""
+    if phi == 0.0:
+        return z
+    out = np.empty_like(z)
+    keys = layout.sensor if np.any(layout.sensor != "") else np.full(len(z), "")
+    c = math.sqrt(1.0 - phi * phi)
+    for name in np.unique(keys):
+        idx = np.flatnonzero(keys == name)
+        idx = idx[np.argsort(layout.t[idx], kind="stable")]
+        e = z[idx[0]]
+        out[idx[0]] = e
+        for i in idx[1:]:
+            e = phi * e + c * z[i]
+            out[i] = e
+    return out
 
 
 def simulate(
@@ -66,9 +115,14 @@ def simulate(
     seed: int | np.random.SeedSequence = 0,
     fe: FESettings | None = None,
 ) -> Measurements:
-    """A synthetic measurement set for `cfg.case` at `snr_db` (None: clean), a function of the seed."""
+    """A synthetic measurement set for `cfg.case` at `snr_db` (None: clean), a function of the seed.
+
+    The truth is the girder `cfg.beam` describes (EI per segment, springs at the supports) under the stated
+    axles times the crossing's true load factor (`true_load_factor`); the noise is white, or AR(1) with
+    `data.noise_ar1` along each sensor's series (`ar1_noise`), with the sd that gives `snr_db`."""
     layout = sample_layout(cfg, seed)
-    vt = true_values(cfg, layout, fe)
+    vt = true_values(cfg, layout, fe, true_load_factor(cfg, seed))
     sigma = sigma_for_snr(vt, snr_db)
-    noise = seeding.rng(seed, "noise").standard_normal(vt.size) * sigma
+    z = seeding.rng(seed, "noise").standard_normal(vt.size)
+    noise = ar1_noise(z, layout, cfg.data.noise_ar1) * sigma
     return Measurements(layout.x, layout.t, vt + noise, layout.kind, layout.y, layout.sensor, vt)

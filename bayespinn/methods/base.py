@@ -71,6 +71,9 @@ class Method:
     reference: ClassVar[bool] = False
     Settings: ClassVar[type] = Settings
     modules: ClassVar[tuple[str, ...]] = ()
+    #: whether the method describes real girders: EI per segment, springs at the supports and an uncertain
+    #: load factor (`[model]`); a method that does not is refused such a configuration by `check`
+    real_girders: ClassVar[bool] = False
 
     def __init__(self, settings=None, *, progress: bool = False, executor=None, **fields):
         if settings is None:
@@ -95,6 +98,33 @@ class Method:
     @classmethod
     def code_modules(cls) -> tuple[str, ...]:
         return cls.modules or (cls.__module__,)
+
+    def check(self, data: Measurements, config: Config) -> None:
+        """Refuse, before any method runs, an analysis model this method cannot describe (`InputError`,
+        exit 2, naming the field), rather than silently analyse it as a uniform, pinned, known-load girder
+        with white noise."""
+        m = config.model
+        if m.noise != "iid":
+            raise InputError(
+                "model.noise", m.noise, "'iid' (the AR(1) likelihood is not built yet: issue 23)"
+            )
+        if self.real_girders:
+            return
+        why = f"for {self.display}, which describes uniform, pinned girders under known loads (issue 24)"
+        if m.EI_segments != 1:
+            raise InputError(
+                "model.EI_segments", m.EI_segments, f"1 {why}; --method modal infers it"
+            )
+        if m.supports != "pinned":
+            raise InputError(
+                "model.supports", m.supports, f"'pinned' {why}; --method modal infers it"
+            )
+        if config.infers_load_factor:
+            raise InputError(
+                "vehicle.load_rel_sd",
+                config.vehicle.load_rel_sd,
+                f"0, or [model] load_factor = 'off', {why}; --method modal infers it",
+            )
 
     def infer(self, data: Measurements, config: Config, *, seed) -> Posterior:
         raise NotImplementedError

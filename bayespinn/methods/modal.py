@@ -25,6 +25,22 @@ class ModalMCMC(Method):
     colour = "#1f5fa8"
     reference = True
     Settings = ModalSettings
+    real_girders = True
+
+    def check(self, data, config) -> None:
+        super().check(data, config)
+        if not config.ideal:
+            from ..errors import InputError
+            from ..uq.girder_reference import check_segments
+
+            check_segments(config, data)
+            if self.settings.noise_prior != "vague":
+                raise InputError(
+                    "--noise-prior",
+                    self.settings.noise_prior,
+                    "vague for a girder with EI per segment, springs or an uncertain load (its "
+                    "reference integrates sigma out under the vague prior)",
+                )
 
     def infer(self, data, config, *, seed):
         from ..uq.modal_mcmc import modal_posterior
@@ -32,6 +48,12 @@ class ModalMCMC(Method):
         from ..uq.sampler import MCMCSettings
 
         s = self.settings
+        if not config.ideal:
+            from ..uq.girder_reference import girder_reference
+
+            return girder_reference(
+                data, config, seed=seeding.stream(seed, "emcee"), progress=self.progress
+            )
         return modal_posterior(
             data,
             config,

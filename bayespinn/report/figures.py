@@ -38,6 +38,10 @@ class SkipFigure(Exception):
     """Nothing to draw (e.g. no method has a predictor); the message says why."""
 
 
+class NotApplicable(SkipFigure):
+    """A figure of a quantity this run did not infer: left out without a note."""
+
+
 @dataclass(frozen=True)
 class FigureFile:
     """A figure written into the folder: file name, title and a caption with what it shows."""
@@ -72,6 +76,11 @@ def _save(fig, path: Path) -> None:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
     write_bytes(path, buf.getvalue())
+
+
+def _true_load(result) -> float:
+    """The crossing's true axle-load factor (1 unless the loads were uncertain and drawn)."""
+    return float((result.truth or {}).get("load_factor", 1.0))
 
 
 def _subtitle(result) -> str:
@@ -262,7 +271,7 @@ def span_profiles_figure(result, cfg: Config, path: Path, rng: np.random.Generat
             if result.truth is not None:
                 ax.plot(
                     x,
-                    pv.fe_truth(cfg, x, np.full(x.size, t), q) * f,
+                    pv.fe_truth(cfg, x, np.full(x.size, t), q, load_factor=_true_load(result)) * f,
                     label="FE truth",
                     **TRUTH_STYLE,
                 )
@@ -346,7 +355,10 @@ def gauges_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> 
         if result.truth is not None:
             ax.plot(
                 t,
-                pv.fe_truth(cfg, np.full(t.size, s.x), t, "strain", y=s.y) * f,
+                pv.fe_truth(
+                    cfg, np.full(t.size, s.x), t, "strain", y=s.y, load_factor=_true_load(result)
+                )
+                * f,
                 label="FE truth",
                 **TRUTH_STYLE,
             )
@@ -378,6 +390,76 @@ def gauges_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> 
 
 
 #: (file name, title, function), in report order
+def _girders(result) -> dict:
+    """The methods whose posterior carries girder draws (EI per segment, springs, load factor)."""
+    return {
+        k: p.girder for k, p in result.posteriors.items() if getattr(p, "girder", None) is not None
+    }
+
+
+def ei_span_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> str:
+    """EI per segment along the span: posterior mean and 90 % band, the nominal and the truth."""
+    gs = {k: g for k, g in _girders(result).items() if g.n_segments > 1}
+    if not gs:
+        raise NotApplicable("no method inferred EI per segment")
+    fig = _new_figure(7.5, 4.2)
+    ax = fig.subplots()
+    for key, g in gs.items():
+        e = g.EI_segments.reshape(-1, g.n_segments) / 1e9
+        lo, mean, hi = np.quantile(e, 0.05, axis=0), e.mean(0), np.quantile(e, 0.95, axis=0)
+        edges = np.asarray(g.edges, float)
+        ax.stairs(mean, edges, baseline=None, color=_color(key), lw=1.6, label=f"{name(key)}: mean")
+        ax.stairs(
+            hi, edges, baseline=lo, fill=True, color=_color(key), alpha=0.25, label="90 % band"
+        )
+        ax.axhline(0.9 * g.EI_nominal / 1e9, color="0.4", ls=":", lw=1, label="90 % of nominal")
+        ax.axhline(g.EI_nominal / 1e9, color="0.4", ls="-.", lw=1, label="nominal")
+    truth = (result.truth or {}).get("EI_segments")
+    if truth:
+        S = len(truth)
+        ax.stairs(
+            np.asarray(truth) / 1e9,
+            np.linspace(0, cfg.beam.length, S + 1),
+            label="truth",
+            **TRUTH_STYLE,
+        )
+    ax.set_xlabel("position along the span x (m)")
+    ax.set_ylabel("EI (GN m²)")
+    ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"EI along the span ({_subtitle(result)})", fontsize=11)
+    _save(fig, path)
+    return (
+        "EI of each equal segment: posterior mean (line) and 90 % credible band (shading); dotted: 90 % "
+        "of the nominal EI, the damage threshold of P(damaged); dashed black: the truth where known."
+    )
+
+
+def ei_load_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> str:
+    """Pair plot of the span-equivalent EI against the axle-load factor."""
+    gs = {k: g for k, g in _girders(result).items() if g.load_factor is not None}
+    if not gs:
+        raise NotApplicable("no method inferred a load factor")
+    fig = _new_figure(5.2, 4.6)
+    ax = fig.subplots()
+    for key, g in gs.items():
+        ei = np.asarray(g.EI, float).ravel() / 1e9
+        lf = np.asarray(g.load_factor, float).ravel()
+        pick = rng.choice(ei.size, size=min(2000, ei.size), replace=False)
+        ax.scatter(lf[pick], ei[pick], s=3, alpha=0.3, color=_color(key), label=name(key))
+    t = result.truth or {}
+    if t.get("load_factor") is not None and t.get("EI") is not None:
+        ax.plot([t["load_factor"]], [t["EI"] / 1e9], "k*", ms=10, label="truth")
+    ax.set_xlabel("axle-load factor")
+    ax.set_ylabel("EI, span equivalent (GN m²)")
+    ax.legend(fontsize=7, loc="best")
+    fig.suptitle(f"EI against the load factor ({_subtitle(result)})", fontsize=11)
+    _save(fig, path)
+    return (
+        "Posterior draws of EI against the common axle-load factor: along the ridge EI / load is what "
+        "the quasi-static response fixes; the star marks the truth where known."
+    )
+
+
 FIGURES = (
     ("fig_posteriors.png", "Posteriors of EI and σ", posteriors_figure),
     ("fig_data_fit.png", "Data against the posterior predictive", data_fit_figure),
@@ -387,6 +469,8 @@ FIGURES = (
         span_profiles_figure,
     ),
     ("fig_gauges.png", "Strain histories at the gauges (paper Fig. 7)", gauges_figure),
+    ("fig_ei_span.png", "EI along the span", ei_span_figure),
+    ("fig_ei_load.png", "EI against the axle-load factor", ei_load_figure),
 )
 
 
@@ -411,7 +495,10 @@ def make_figures(result, cfg: Config, folder: str | Path) -> tuple[list[FigureFi
             written.append(FigureFile(fname, title, caption))
         except SkipFigure as why:
             log.info("figure %s not drawn: %s", fname, why)
-            if fname != "fig_gauges.png" or "deflection data" not in str(why):
+            quiet = isinstance(why, NotApplicable) or (
+                fname == "fig_gauges.png" and "deflection data" in str(why)
+            )
+            if not quiet:
                 notes.append(f"{title}: not drawn ({why}).")
         except Exception as exc:  # a figure must never lose the report
             log.warning(

@@ -141,7 +141,7 @@ def fingerprint(
 
     spec = {
         "method": method,
-        "cfg": jsonable(dataclasses.asdict(cfg)),
+        "cfg": jsonable(cfg.identity()),
         "snr_db": snr_db,
         "seed": seed,
         "level": level,

@@ -9,6 +9,7 @@ Two kinds of band are used and always named:
 
 from __future__ import annotations
 
+import functools
 import zlib
 from collections.abc import Callable
 
@@ -93,18 +94,47 @@ def band(draws: np.ndarray, level: float = LEVEL) -> tuple[np.ndarray, np.ndarra
     return draws.mean(axis=0), lo, hi
 
 
-def fe_truth(cfg: Config, x: np.ndarray, t: np.ndarray, quantity: str, y=None) -> np.ndarray:
-    """Finite-element reference at (x, t) with the configuration's (true) EI, SI units."""
+def fe_truth(
+    cfg: Config, x: np.ndarray, t: np.ndarray, quantity: str, y=None, load_factor: float = 1.0
+) -> np.ndarray:
+    """Finite-element reference at (x, t) with the configuration's (true) girder, SI units: the uniform pinned
+    girder's (`physics.fem`), or with EI per segment or springs the real girder's (`physics.girder`); every
+    axle load times `load_factor` (the crossing's true factor when the loads were uncertain)."""
     x = np.asarray(x, float).ravel()
     t = np.broadcast_to(np.asarray(t, float), x.shape).ravel()
     if quantity == "deflection":
-        return fe_response(cfg.beam, cfg.vehicle, x, t, 1.0, 0.0)
-    if quantity == "moment":
-        return fe_response(cfg.beam, cfg.vehicle, x, t, 0.0, -cfg.beam.EI)
-    if quantity == "strain":
-        yy = np.broadcast_to(np.asarray(y, float), x.shape)
-        return fe_response(cfg.beam, cfg.vehicle, x, t, 0.0, -yy)
-    raise ValueError(f"quantity must be deflection, moment or strain, got {quantity!r}")
+        a_u, a_xx = 1.0, 0.0
+    elif quantity == "moment":
+        a_u, a_xx = 0.0, -_ei_at(cfg, x)
+    elif quantity == "strain":
+        a_u, a_xx = 0.0, -np.broadcast_to(np.asarray(y, float), x.shape)
+    else:
+        raise ValueError(f"quantity must be deflection, moment or strain, got {quantity!r}")
+    if cfg.beam.ideal and load_factor == 1.0:
+        return fe_response(cfg.beam, cfg.vehicle, x, t, a_u, a_xx)
+    t_end = max(cfg.duration, float(t.max()))
+    return _girder_crossing(cfg.beam, cfg.vehicle, float(load_factor), t_end).sample(
+        x, t, a_u, a_xx
+    )
+
+
+def _ei_at(cfg: Config, x: np.ndarray) -> np.ndarray:
+    seg = np.asarray(cfg.beam.segments, float)
+    i = np.clip((x / cfg.beam.length * seg.size).astype(int), 0, seg.size - 1)
+    return seg[i]
+
+
+@functools.lru_cache(maxsize=4)
+def _girder_crossing(beam, vehicle, load_factor: float, t_end: float):
+    from ..physics.fem import FESettings
+    from ..physics.girder import Girder, GirderFE
+
+    fe = FESettings()
+    girder = Girder(
+        beam.length, beam.segments, beam.mass_per_length, beam.section_depth, beam.damping_ratio,
+        beam.rotational_stiffness,
+    )  # fmt: skip
+    return GirderFE(girder, fe.n_elements).solve(vehicle, t_end, fe.n_steps, load_factor)
 
 
 def with_predictor(posteriors: dict[str, Posterior]) -> dict[str, Posterior]:

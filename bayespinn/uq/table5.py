@@ -80,7 +80,8 @@ def table5(
         row = {"t": t}
         for q in QUANTITIES:
             draws = pv.predict(post, x, tt, q, rng, n_draws)
-            row[q] = _metrics(draws, pv.fe_truth(cfg, x, tt, q), level)
+            lf = (result.truth or {}).get("load_factor", 1.0)
+            row[q] = _metrics(draws, pv.fe_truth(cfg, x, tt, q, load_factor=lf), level)
         rows.append(row)
     return {
         "schema": "bayespinn.table5/1",

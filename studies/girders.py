@@ -1,0 +1,254 @@
+"""Real girders: does the reference posterior of EI per segment, the support springs and the load factor mean
+what it says? Coverage of every inferred parameter over independent synthetic datasets.
+
+Replicate i of a study simulates the configuration's true girder (`[beam] EI` per segment, its springs, a
+crossing's load factor drawn with `vehicle.load_rel_sd`) at the SNR with its own seed, runs the modal
+reference (`--method modal`: the girder posterior whenever `[model]` asks for more than a uniform pinned
+girder), and records, for each parameter with a known truth, whether its central 90 % interval holds it;
+and each segment's P(damaged). Over the replicates: hits per parameter against the binomial 99 % acceptance
+region of a calibrated interval, with the power of that check against 80 % coverage stated beside it.
+
+One study per configuration, case and SNR in <out>/girders/<name>-<case>-snr<S>.json, rewritten atomically
+after every replicate: an interrupted study resumes from it; replicates computed by other code are run
+again. <out>/girders.md and girders.json gather every study there.
+
+    python studies/girders.py --config examples/damaged-girder.toml --snr 30 --replicates 100
+    python studies/girders.py --config examples/damaged-girder.toml --case strain --snr 30 --replicates 100
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import sys
+import time
+import zlib
+from pathlib import Path
+
+import common as c
+import numpy as np
+from scipy import stats
+
+from bayespinn.config import CASES, parse_snr, resolve, snr_label
+from bayespinn.data.synthetic import simulate
+from bayespinn.errors import InputError
+from bayespinn.options import int_at_least
+from bayespinn.pipeline import analyse, true_values_of
+from bayespinn.report.document import Heading, Paragraph, table
+
+log = logging.getLogger("studies.girders")
+
+STUDY_SCHEMA = "bayespinn.studies.girders-study/1"
+SCHEMA = "bayespinn.studies.girders/1"
+LEVEL = 0.9
+#: the acceptance region's probability, and the miscalibrated coverage its power is stated against
+REGION, POWER_AGAINST = 0.99, 0.8
+
+
+def data_seed(seed: int, i: int) -> np.random.SeedSequence:
+    """Replicate i's seed (data and analysis) in a study with root seed `seed`."""
+    return np.random.SeedSequence(int(seed), spawn_key=(zlib.crc32(b"girders"), int(i)))
+
+
+def region(n: int, level: float = LEVEL) -> tuple[int, int]:
+    """The central binomial acceptance region of hits for a calibrated interval over n replicates."""
+    lo, hi = stats.binom.ppf([(1 - REGION) / 2, 1 - (1 - REGION) / 2], n, level)
+    return int(lo), int(hi)
+
+
+def power(n: int, level: float = LEVEL, against: float = POWER_AGAINST) -> float:
+    """P(hits outside the region) when the interval's true coverage is `against`."""
+    lo, hi = region(n, level)
+    return float(stats.binom.cdf(lo - 1, n, against) + stats.binom.sf(hi, n, against))
+
+
+def parameters(summary_method: dict, truth: dict) -> dict[str, tuple[list, float]]:
+    """{parameter: (ci90, truth)} of every inferred parameter whose truth is known and finite."""
+    out = {"EI": (summary_method["EI"]["ci90"], truth["EI"])}
+    for i, e in enumerate(summary_method.get("EI_segments") or []):
+        out[f"EI_segments[{i}]"] = (e["ci90"], (truth.get("EI_segments") or [None] * 99)[i])
+    for i, k in enumerate(summary_method.get("rotational_stiffness") or []):
+        t = (truth.get("rotational_stiffness") or [None, None])[i]
+        out[f"rotational_stiffness[{i}]"] = (k["ci90"], t)
+    if summary_method.get("load_factor"):
+        out["load_factor"] = (summary_method["load_factor"]["ci90"], truth.get("load_factor"))
+    return {k: v for k, v in out.items() if v[1] is not None and np.isfinite(v[1])}
+
+
+def replicate(cfg, snr: float | None, seed: int, i: int, opts) -> dict:
+    seq = data_seed(seed, i)
+    t0 = time.perf_counter()
+    data = simulate(cfg, snr, seq)
+    truth = true_values_of(cfg, seq)
+    res = analyse(data, cfg, methods=["modal"], seed=seq, snr_db=snr, opts=opts, truth=truth)
+    m = res.summary["methods"]["modal_mcmc"]
+    hits = {k: bool(ci[0] <= t <= ci[1]) for k, (ci, t) in parameters(m, truth).items()}
+    return {
+        "index": i,
+        "hits": hits,
+        "p_damaged": [e["p_damaged"] for e in m.get("EI_segments") or []],
+        "EI_mean": m["EI"]["mean"],
+        "EI_sd": m["EI"]["sd"],
+        "rhat": m.get("diagnostics", {}).get("rhat"),
+        "converged": m.get("diagnostics", {}).get("converged"),
+        "time_s": time.perf_counter() - t0,
+        "code_version": c.code_versions(["modal_mcmc"])["modal_mcmc"],
+    }
+
+
+def summarise(doc: dict) -> dict:
+    recs = doc["records"]
+    n = len(recs)
+    names = sorted({k for r in recs for k in r["hits"]})
+    rows = {}
+    for k in names:
+        h = [r["hits"][k] for r in recs if k in r["hits"]]
+        lo, hi = region(len(h))
+        rows[k] = {
+            "replicates": len(h),
+            "hits": int(sum(h)),
+            "region": [lo, hi],
+            "inside": bool(lo <= sum(h) <= hi),
+            "power_vs_80pct": power(len(h)),
+        }
+    pd = np.array([r["p_damaged"] for r in recs if r["p_damaged"]], float)
+    return {
+        "replicates": n,
+        "coverage": rows,
+        "p_damaged_median": np.median(pd, axis=0).tolist() if pd.size else None,
+        "p_damaged_min": pd.min(axis=0).tolist() if pd.size else None,
+        "converged": int(sum(bool(r.get("converged")) for r in recs)),
+        "median_time_s": float(np.median([r["time_s"] for r in recs])) if recs else None,
+    }
+
+
+def study_path(out: Path, config: Path, case: str, snr: float | None) -> Path:
+    return out / "girders" / f"{config.stem}-{case}-snr{snr_label(snr)}.json"
+
+
+def run_study(args, argv, snr) -> dict:
+    cfg = resolve(args.case, args.config)
+    if cfg.ideal and cfg.beam.ideal:
+        raise InputError(
+            "--config", str(args.config), "a real girder (EI per segment, springs or load)"
+        )
+    key = hashlib.sha256(
+        json.dumps(
+            {
+                "cfg": c.jsonable(cfg.identity()),
+                "snr": snr,
+                "seed": args.seed,
+                "profile": args.profile,
+            },
+            sort_keys=True,
+        ).encode()
+    ).hexdigest()[:16]
+    path = study_path(Path(args.out), Path(args.config), args.case, snr)
+    doc = {}
+    if path.is_file():
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if doc.get("schema") != STUDY_SCHEMA or doc.get("fingerprint") != key:
+            log.warning("warning: %s is another study: starting afresh", path)
+            doc = {}
+    if not doc:
+        doc = {"schema": STUDY_SCHEMA, "fingerprint": key, "records": []}
+    today = c.code_versions(["modal_mcmc"])["modal_mcmc"]
+    kept = [r for r in doc["records"] if r.get("code_version") == today]
+    if len(kept) < len(doc["records"]):
+        log.warning("%d replicates by other code are run again", len(doc["records"]) - len(kept))
+    doc.update(
+        config=str(args.config),
+        config_values=c.jsonable(cfg.to_dict()),
+        case=args.case,
+        snr_db=snr,
+        seed=args.seed,
+        level=LEVEL,
+        records=kept,
+        provenance=c.provenance(__file__, argv, args, methods=["modal_mcmc"]),
+    )
+    done = {r["index"] for r in kept}
+    opts = c.run_options(args, snr)
+    for i in range(args.replicates):
+        if i in done:
+            continue
+        doc["records"].append(replicate(cfg, snr, args.seed, i, opts))
+        doc["records"].sort(key=lambda r: r["index"])
+        doc["summary"] = summarise(doc)
+        c.write_json(path, doc)  # atomic: an interruption loses at most the replicate under way
+        log.info("[girders] replicate %d of %d", i + 1, args.replicates)
+    doc["summary"] = summarise(doc)
+    c.write_json(path, doc)
+    return doc
+
+
+def write_page(out: Path) -> dict:
+    studies = {}
+    for f in sorted((out / "girders").glob("*.json")):
+        doc = json.loads(f.read_text(encoding="utf-8"))
+        if doc.get("schema") == STUDY_SCHEMA:
+            studies[f.stem] = doc
+    page = {"schema": SCHEMA, "studies": {k: {**d, "records": None} for k, d in studies.items()}}
+    c.write_json(out / "girders.json", page)
+    blocks = [
+        Heading("Real girders: coverage of the reference posterior", 1),
+        Paragraph(
+            "Each study: independent synthetic datasets of one girder configuration (the truth: EI per "
+            "segment, springs at the supports, the crossing's load factor), the modal reference on each; per "
+            f"parameter the replicates whose central {100 * LEVEL:.0f} % interval holds the truth, against the "
+            f"binomial {100 * REGION:.0f} % acceptance region of a calibrated interval, and the power of that "
+            f"check to reject {100 * POWER_AGAINST:.0f} % coverage."
+        ),
+    ]
+    for name, d in studies.items():
+        s = d["summary"]
+        rows = [
+            (
+                k,
+                f"{v['hits']} / {v['replicates']}",
+                f"[{v['region'][0]}, {v['region'][1]}]",
+                "yes" if v["inside"] else "**no**",
+                f"{v['power_vs_80pct']:.2f}",
+            )
+            for k, v in s["coverage"].items()
+        ]
+        blocks += [
+            Heading(f"{name}: {d['config']}, {d['case']}, SNR {snr_label(d['snr_db'])}", 2),
+            table(("parameter", "hits", "99 % region", "inside", "power vs 80 %"), rows),
+            Paragraph(
+                f"{s['replicates']} replicates, {s['converged']} converged; median time "
+                f"{s['median_time_s']:.1f} s per replicate; P(damaged) per segment, median "
+                f"{', '.join(f'{p:.3f}' for p in (s['p_damaged_median'] or []))}, smallest "
+                f"{', '.join(f'{p:.3f}' for p in (s['p_damaged_min'] or []))}. Command: "
+                f"`{d['provenance']['command']}`."
+            ),
+        ]
+    c.write_markdown(out / "girders.md", blocks)
+    return page
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else list(argv)
+    p = c.parser(
+        "Coverage of the reference posterior of real girders (EI per segment, springs, load)."
+    )
+    p.add_argument(
+        "--config", required=True, help="a girder TOML ([beam] EI per segment, [model], ...)"
+    )
+    p.add_argument(
+        "--replicates", type=int_at_least("--replicates", 1), default=100, help="datasets (100)"
+    )
+    p.add_argument("--snr", default="30", help="SNR in dB (default 30)")
+    p.add_argument("--case", default="deflection", help="deflection (default) or strain")
+    args = p.parse_args(argv)
+    c.setup_logging(args.quiet)
+    if args.case not in CASES:
+        raise InputError("--case", args.case, "one of " + ", ".join(CASES))
+    snr = parse_snr(args.snr)
+    run_study(args, argv, snr)
+    write_page(Path(args.out))
+    return 0
+
+
+if __name__ == "__main__":
+    c.entry(main)
