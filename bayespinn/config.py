@@ -401,7 +401,7 @@ class Config:
                     for f in fields(Beam)
                     if f.name not in ("EI_profile", "rotational_stiffness")
                 },
-                "EI_segments": list(self.beam.segments),
+                "EI": list(self.beam.EI_profile) if self.beam.EI_profile else self.beam.EI,
                 "rotational_stiffness": [
                     "fixed" if math.isinf(k) else k for k in self.beam.rotational_stiffness
                 ],

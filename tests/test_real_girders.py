@@ -56,11 +56,12 @@ def test_toml_keys_of_the_contract():
     # a scalar EI and a one-element list are the uniform girder
     assert Beam(EI=[2e9]) == Beam(EI=2e9) and Beam(EI=2e9).ideal
     d = cfg.to_dict()
-    assert d["beam"]["EI_segments"] == DAMAGED and d["beam"]["rotational_stiffness"] == [
-        0.0,
-        "fixed",
-    ]
+    assert d["beam"]["EI"] == DAMAGED and d["beam"]["rotational_stiffness"] == [0.0, "fixed"]
     assert json.dumps(d)  # manifests are plain JSON
+    # a manifest's configuration resolves back to the same girder, truck, prior and model
+    again = resolve("deflection", {k: v for k, v in d.items() if k != "case"})
+    for part in ("beam", "vehicle", "prior", "model"):
+        assert getattr(again, part) == getattr(cfg, part), part
 
 
 def test_the_ideal_girders_identity_is_what_it_was():

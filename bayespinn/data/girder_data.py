@@ -19,8 +19,6 @@ normal as the prior of the inferred load factor.
 
 from __future__ import annotations
 
-import zlib
-
 import numpy as np
 
 from .. import seeding
@@ -29,10 +27,12 @@ from ..errors import InputError
 from ..physics.fem import FESettings
 from ..physics.girder import Girder, GirderFE
 from .measurements import Measurements
-from .synthetic import sigma_for_snr
-
-#: largest relative sd of the axle loads that `draw_load_factor` accepts
-LOAD_REL_SD_MAX = 0.2
+from .synthetic import (  # noqa: F401 (re-exported: the load factor's draw lives with simulate)
+    LOAD_REL_SD_MAX,
+    check_load_rel_sd,
+    draw_load_factor,
+    sigma_for_snr,
+)
 
 
 def equivalent_EI(girder: Girder) -> float:
@@ -67,39 +67,6 @@ def layout_config(
     )
     data = DataSpec(n_points=n_points, sample_rate=sample_rate, sensors=tuple(sensors))
     return Config(case=case, beam=beam, vehicle=vehicle, data=data)
-
-
-def _stream(seed: int | np.random.SeedSequence, name: str) -> np.random.SeedSequence:
-    """An independent named SeedSequence under a root seed (as `seeding.stream`, for a name that is
-    not one of its registered streams)."""
-    key = zlib.crc32(name.encode())
-    if isinstance(seed, np.random.SeedSequence):
-        return np.random.SeedSequence(seed.entropy, spawn_key=tuple(seed.spawn_key) + (key,))
-    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-        raise InputError("seed", seed, "an integer >= 0 or a numpy SeedSequence")
-    return np.random.SeedSequence(int(seed), spawn_key=(key,))
-
-
-def check_load_rel_sd(load_rel_sd: float) -> float:
-    """load_rel_sd as a float in [0, LOAD_REL_SD_MAX]; InputError('vehicle.load_rel_sd') otherwise."""
-    v = _check_number("vehicle.load_rel_sd", load_rel_sd, nonneg=True)
-    if v > LOAD_REL_SD_MAX:
-        raise InputError("vehicle.load_rel_sd", load_rel_sd, f"a number in [0, {LOAD_REL_SD_MAX}]")
-    return v
-
-
-def draw_load_factor(load_rel_sd: float, seed: int | np.random.SeedSequence) -> float:
-    """The true common factor on every axle load of one crossing: 1 + load_rel_sd z, z ~ N(0, 1),
-    redrawn until positive (a normal truncated to > 0). Exactly 1.0 when load_rel_sd = 0.
-    A function of the seed (its own "load_factor" stream, independent of the points and the noise)."""
-    sd = check_load_rel_sd(load_rel_sd)
-    r = np.random.default_rng(_stream(seed, "load_factor"))
-    if sd == 0.0:
-        return 1.0
-    while True:
-        lf = 1.0 + sd * float(r.standard_normal())
-        if lf > 0.0:
-            return lf
 
 
 def simulate_girder(
