@@ -429,16 +429,45 @@ class TiedVibration(FreeVibration):
     def n_features(self) -> int:
         return self.modes
 
-    def jet(
-        self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor, detach: bool = True
-    ) -> Jet:
-        """Jet of the K columns (highest mode first, as `FreeVibration`) at points (M, N): (M, N, K)."""
-        lei = (log_ei.detach() if detach else log_ei).to(xi.dtype)
+    _parts: _JetCache = field(default_factory=_JetCache, init=False, repr=False, compare=False)
+
+    def _fixed(self, xi: Tensor, tau: Tensor, kx: int) -> tuple:
+        """What does not depend on EI at these points: the mode shapes' x-derivatives 0..kx (M, N, K) and,
+        per event (an axle entering or leaving inside the window), the time since it (M, N, E, 1), whether
+        it has happened, and its load times its sign per mode (E, K)."""
         n = torch.arange(1, self.modes + 1, dtype=xi.dtype, device=xi.device)  # (K,)
         k = math.pi * n
         kxi = xi.unsqueeze(-1) * k  # (M, N, K)
         sx, cx = torch.sin(kxi), torch.cos(kxi)
         x_parts = [sx, cx, -sx, -cx]
+        X = [k**m * x_parts[m % 4] for m in range(kx + 1)]
+        t0, load, leaves = [], [], []
+        for p, d in zip(self.loads, self.delays, strict=True):
+            for t, out in ((d, False), (d + 1.0 / self.speed, True)):
+                if t < 1.0:
+                    t0.append(t)
+                    load.append(p)
+                    leaves.append(out)
+        opts = {"dtype": xi.dtype, "device": xi.device}
+        exit_sign = -((-1.0) ** n)  # (-1)^(n + 1), (K,)
+        lv = torch.tensor(leaves, device=xi.device).unsqueeze(-1)
+        c = torch.tensor(load, **opts).unsqueeze(-1) * torch.where(
+            lv, exit_sign, torch.ones_like(n)
+        )
+        s = tau.unsqueeze(-1) - torch.tensor(t0, **opts)  # (M, N, E)
+        sp = s.clamp_min(0.0).unsqueeze(-1)  # (M, N, E, 1)
+        on = (s >= 0.0).to(xi.dtype).unsqueeze(-1)
+        return n, X, sp, on, c
+
+    def jet(
+        self, xi: Tensor, tau: Tensor, kx: int, kt: int, log_ei: Tensor, detach: bool = True
+    ) -> Jet:
+        """Jet of the K columns (highest mode first, as `FreeVibration`) at points (M, N): (M, N, K).
+        The parts that do not depend on EI are kept per point set (`_JetCache`), so re-evaluating the columns
+        at another EI (the last layer's NUTS) costs only the EI-dependent ones."""
+        lei = (log_ei.detach() if detach else log_ei).to(xi.dtype)
+        n, X, sp, on, c = self._parts.get(xi, tau, kx, -1, lambda: self._fixed(xi, tau, kx))
+        k = math.pi * n
         # static amplitude per unit load (the enrichment's series coefficient) and the entry amplitudes
         S = 2.0 * torch.exp(-((k * self.beta_rel) ** 2) / 4.0) / k**4 * 48.0  # (K,)
         a, b = forced_amplification(math.pi * self.speed / self.frequency, n, lei, self.damping)
@@ -450,34 +479,25 @@ class TiedVibration(FreeVibration):
         B0 = torch.zeros_like(a) if b is None else -b
         A0 = (-(1.0 + a) * Om + dec * B0) / w
         A0, B0 = A0 * S, B0 * S
-        exit_sign = -((-1.0) ** n)  # (-1)^(n + 1)
-        T = [torch.zeros_like(kxi) for _ in range(kt + 1)]
-        for p, d in zip(self.loads, self.delays, strict=True):
-            for t0, sign in ((d, 1.0), (d + 1.0 / self.speed, exit_sign)):
-                if t0 >= 1.0:
-                    continue
-                s = (tau - t0).unsqueeze(-1)
-                sp = s.clamp_min(0.0)
-                e = torch.exp(-dec * sp) * (s >= 0.0).to(xi.dtype)
-                sn, cs = torch.sin(w * sp), torch.cos(w * sp)
-                A, B = p * sign * A0, p * sign * B0
-                T[0] = T[0] + e * (A * sn + B * cs)
-                if kt >= 1:
-                    T[1] = T[1] + e * (A * (-dec * sn + w * cs) + B * (-dec * cs - w * sn))
-                if kt >= 2:
-                    c2 = dec * dec - w * w
-                    T[2] = T[2] + e * (
-                        A * (c2 * sn - 2 * dec * w * cs) + B * (c2 * cs + 2 * dec * w * sn)
-                    )
-
-        def xfac(m: int) -> Tensor:
-            return k**m * x_parts[m % 4]
-
-        X0 = xfac(0)
+        dec4, w4 = dec.unsqueeze(2), w.unsqueeze(2)  # (M, 1, 1, K)
+        A, B = A0.unsqueeze(2) * c, B0.unsqueeze(2) * c  # (M, 1, E, K)
+        e = torch.exp(-dec4 * sp) * on
+        ang = w4 * sp
+        sn, cs = torch.sin(ang), torch.cos(ang)
+        T = [(e * (A * sn + B * cs)).sum(2)]
+        if kt >= 1:
+            T.append((e * (A * (-dec4 * sn + w4 * cs) + B * (-dec4 * cs - w4 * sn))).sum(2))
+        if kt >= 2:
+            c2 = dec4 * dec4 - w4 * w4
+            T.append(
+                (e * (A * (c2 * sn - 2 * dec4 * w4 * cs) + B * (c2 * cs + 2 * dec4 * w4 * sn))).sum(
+                    2
+                )
+            )
         return Jet(
-            (X0 * T[0]).flip(-1),
-            tuple((xfac(m) * T[0]).flip(-1) for m in range(1, kx + 1)),
-            tuple((X0 * T[m]).flip(-1) for m in range(1, kt + 1)),
+            (X[0] * T[0]).flip(-1),
+            tuple((X[m] * T[0]).flip(-1) for m in range(1, kx + 1)),
+            tuple((X[0] * T[m]).flip(-1) for m in range(1, kt + 1)),
         )
 
     def lowest(self) -> TiedVibration:

@@ -297,16 +297,23 @@ class LastLayer:
     def _fv_jet(
         self, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int, log_theta: torch.Tensor
     ) -> Jet:
-        j = self.fv.jet(
-            xi.unsqueeze(0), tau.unsqueeze(0), kx, kt, log_theta.reshape(1), detach=False
-        )
+        # the same (1, N) point tensors at every theta, so the free vibrations' jet cache can hold the
+        # parts that do not depend on theta
+        key = (id(xi), id(tau))
+        pts = self.__dict__.setdefault("_batched_points", {})
+        if key not in pts:
+            pts[key] = (xi, tau, xi.unsqueeze(0), tau.unsqueeze(0))
+        _, _, xb, tb = pts[key]
+        j = self.fv.jet(xb, tb, kx, kt, log_theta.reshape(1), detach=False)
         return j.map(lambda c: c[0])
 
     def _varying(self, log_theta: torch.Tensor):
         """The free vibrations' data design Dv (n, nv) and initial-condition rows Cv at theta."""
         jd = self._fv_jet(self.xi_d, self.tau_d, self.kx_d, 0, log_theta)
         Dv = self._design(jd.value, jd.dx(2) if self.kx_d else None)
-        ji = self._fv_jet(self.xi_i, torch.zeros_like(self.xi_i), 0, 1, log_theta)
+        if not hasattr(self, "tau_i"):
+            self.tau_i = torch.zeros_like(self.xi_i)
+        ji = self._fv_jet(self.xi_i, self.tau_i, 0, 1, log_theta)
         Cv = torch.cat([ji.value, ji.dt(1)])
         return Dv, Cv
 
