@@ -191,6 +191,7 @@ def test_study_bad_input_exits_2_and_writes_nothing(tmp_path, flags, field):
 
 
 @pytest.mark.slow
+@pytest.mark.study
 @pytest.mark.parametrize(
     ("case", "snr", "bridges"),
     [("deflection", "30", 24), ("deflection", "10", 12), ("strain", "30", 6)],
