@@ -182,25 +182,37 @@ def run_study(args, argv, snr) -> dict:
     return doc
 
 
-def write_page(out: Path) -> dict:
+def gather(out: Path) -> dict:
+    """Every girder study under <out>/girders, summarised, each marked fresh when all its replicates were
+    computed by today's code of the modal reference."""
+    today = c.code_versions(["modal_mcmc"])["modal_mcmc"]
     studies = {}
-    for f in sorted((out / "girders").glob("*.json")):
+    for f in sorted((out / "girders").glob("*.json")) if (out / "girders").is_dir() else []:
         doc = json.loads(f.read_text(encoding="utf-8"))
-        if doc.get("schema") == STUDY_SCHEMA:
-            studies[f.stem] = doc
-    page = {"schema": SCHEMA, "studies": {k: {**d, "records": None} for k, d in studies.items()}}
-    c.write_json(out / "girders.json", page)
-    blocks = [
+        if doc.get("schema") != STUDY_SCHEMA or not doc.get("records"):
+            continue
+        fresh = all(r.get("code_version") == today for r in doc["records"])
+        studies[f.stem] = {
+            **{k: v for k, v in doc.items() if k not in ("records", "config_values")},
+            "summary": summarise(doc),
+            "fresh": fresh,
+        }
+    return {"schema": SCHEMA, "studies": studies}
+
+
+def blocks(page: dict) -> list:
+    out = [
         Heading("Real girders: coverage of the reference posterior", 1),
         Paragraph(
             "Each study: independent synthetic datasets of one girder configuration (the truth: EI per "
             "segment, springs at the supports, the crossing's load factor), the modal reference on each; per "
             f"parameter the replicates whose central {100 * LEVEL:.0f} % interval holds the truth, against the "
             f"binomial {100 * REGION:.0f} % acceptance region of a calibrated interval, and the power of that "
-            f"check to reject {100 * POWER_AGAINST:.0f} % coverage."
+            f"check to reject {100 * POWER_AGAINST:.0f} % coverage. Command: `python studies/girders.py "
+            "--config FILE --snr S --replicates N` (resumable)."
         ),
     ]
-    for name, d in studies.items():
+    for name, d in page["studies"].items():
         s = d["summary"]
         rows = [
             (
@@ -212,18 +224,29 @@ def write_page(out: Path) -> dict:
             )
             for k, v in s["coverage"].items()
         ]
-        blocks += [
+        pd_med = ", ".join(f"{p:.3f}" for p in (s["p_damaged_median"] or []))
+        pd_min = ", ".join(f"{p:.3f}" for p in (s["p_damaged_min"] or []))
+        out += [
             Heading(f"{name}: {d['config']}, {d['case']}, SNR {snr_label(d['snr_db'])}", 2),
             table(("parameter", "hits", "99 % region", "inside", "power vs 80 %"), rows),
             Paragraph(
-                f"{s['replicates']} replicates, {s['converged']} converged; median time "
-                f"{s['median_time_s']:.1f} s per replicate; P(damaged) per segment, median "
-                f"{', '.join(f'{p:.3f}' for p in (s['p_damaged_median'] or []))}, smallest "
-                f"{', '.join(f'{p:.3f}' for p in (s['p_damaged_min'] or []))}. Command: "
-                f"`{d['provenance']['command']}`."
+                f"{s['replicates']} replicates ({'today' + chr(39) + 's code' if d['fresh'] else '**stale**: computed by code that has changed since'}), "
+                f"{s['converged']} converged; median time {s['median_time_s']:.1f} s per replicate"
+                + (
+                    f"; P(damaged) per segment, median {pd_med}, smallest {pd_min}"
+                    if pd_med
+                    else ""
+                )
+                + f". Command: `{d['provenance']['command']}`."
             ),
         ]
-    c.write_markdown(out / "girders.md", blocks)
+    return out
+
+
+def write_page(out: Path) -> dict:
+    page = gather(out)
+    c.write_json(out / "girders.json", page)
+    c.write_markdown(out / "girders.md", blocks(page))
     return page
 
 
