@@ -278,6 +278,8 @@ def find_map(post: GirderLogPosterior, starts: Sequence[np.ndarray] | None = Non
             c = base.copy()
             c[lay.springs] += dz * post.sd[lay.springs]
             cands.append(c)
+    if lay.infer_load:
+        cands += _ridge_starts(post, base)
     cands += [np.asarray(s, float) for s in (starts or [])]
     pad = 1e-3 * post.sd
     bounds = list(zip(post.lo + pad, post.hi - pad, strict=True))
@@ -296,6 +298,34 @@ def find_map(post: GirderLogPosterior, starts: Sequence[np.ndarray] | None = Non
         if res.fun < best_f:
             best, best_f = np.asarray(res.x, float), float(res.fun)
     return best
+
+
+#: the load factor's ridge is scanned over this many prior sds each side, at this many points, and the
+#: best local maxima along it start L-BFGS-B
+RIDGE_SD, RIDGE_POINTS, RIDGE_STARTS = 4.0, 161, 3
+
+
+def _ridge_starts(post: GirderLogPosterior, base: np.ndarray) -> list[np.ndarray]:
+    """Starts along the load factor's ridge. The quasi-static response fixes EI / load, so the posterior
+    has a ridge where both move together; along it the first mode's frequency (sqrt EI) changes, and the
+    vibration's phase over a crossing makes the likelihood oscillate: a local search from the load's prior
+    centre ends on whichever peak is nearest (measured: 15 of 100 replicates at 40 dB, each some 15-40
+    posterior sds off). The ridge is scanned (log EI of every segment and log load shifted together) and
+    its best local maxima are returned."""
+    lay = post.layout
+    S, li = lay.n_segments, lay.load
+    shift = np.linspace(-RIDGE_SD, RIDGE_SD, RIDGE_POINTS) * post.sd[li]
+    pts = np.repeat(base[None], shift.size, axis=0)
+    pts[:, li] = post.loc[li] + shift
+    pts[:, :S] = base[None, :S] + shift[:, None]
+    lp = np.asarray(post(pts), float)
+    peaks = [
+        i
+        for i in range(1, lp.size - 1)
+        if np.isfinite(lp[i]) and lp[i] >= lp[i - 1] and lp[i] >= lp[i + 1]
+    ]
+    peaks.sort(key=lambda i: -lp[i])
+    return [pts[i].copy() for i in peaks[:RIDGE_STARTS]]
 
 
 def laplace_covariance(post: GirderLogPosterior, theta: np.ndarray, h: float = 1e-3) -> np.ndarray:
