@@ -66,6 +66,7 @@ from ..data.measurements import Measurements
 from ..errors import InputError
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
+from ..threads import one_blas_thread
 from .modal_mcmc import TRUNCATION_FRACTION
 from .posterior import jsonable, mcmc_diagnostics, summarise
 from .priors import EIPrior, NoisePrior
@@ -658,6 +659,7 @@ def _check_segments(S: Any, n_data: int) -> int:
     return int(S)
 
 
+@one_blas_thread
 def girder_posterior(
     data: Measurements,
     girder: Girder | Beam,
@@ -693,6 +695,9 @@ def girder_posterior(
     seed : root seed (walker starts and moves: "emcee" stream; sigma draws: "noise").
     settings : run-length rules.
     n_elements : FE elements of the surrogate.
+
+    Runs with one BLAS thread: its small dense algebra is faster so, and its draws are then the same function
+    of the seed on every machine (two threads round differently, and the chains drift apart).
 
     Returns
     -------
