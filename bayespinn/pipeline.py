@@ -141,10 +141,7 @@ def true_values_of(cfg: Config, seed) -> dict:
     from .physics.girder import Girder
 
     b = cfg.beam
-    girder = Girder(
-        b.length, b.segments, b.mass_per_length, b.section_depth, b.damping_ratio,
-        b.rotational_stiffness,
-    )  # fmt: skip
+    girder = Girder.from_beam(b, b.segments, b.rotational_stiffness)
     t = girder_truth(girder, cfg.model.EI_segments, true_load_factor(cfg, seed))
     if cfg.model.EI_segments > 1:
         out["EI_segments"] = t["EI_segments"]

@@ -130,10 +130,7 @@ def _girder_crossing(beam, vehicle, load_factor: float, t_end: float):
     from ..physics.girder import Girder, GirderFE
 
     fe = FESettings()
-    girder = Girder(
-        beam.length, beam.segments, beam.mass_per_length, beam.section_depth, beam.damping_ratio,
-        beam.rotational_stiffness,
-    )  # fmt: skip
+    girder = Girder.from_beam(beam, beam.segments, beam.rotational_stiffness)
     return GirderFE(girder, fe.n_elements).solve(vehicle, t_end, fe.n_steps, load_factor)
 
 
