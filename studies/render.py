@@ -30,7 +30,11 @@ def page_text(name: str, out: Path) -> str | None:
     from bayespinn.report.markdown import render_markdown
 
     mod = importlib.import_module(name)
-    if name in ("family", "girders"):  # gathered from the study files under <out>/<name>
+    if name in (
+        "family",
+        "girders",
+        "fitcheck",
+    ):  # gathered from the study files under <out>/<name>
         page = mod.gather(out)
         return render_markdown(mod.blocks(page)) if page["studies"] else None
     path = out / f"{name}.json"
@@ -61,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             c.write_markdown(out / f"{name}.md", mod.blocks(doc))
         log.info("rendered %s", out / f"{name}.md")
-    for name in ("family", "girders"):
+    for name in ("family", "girders", "fitcheck"):
         mod = importlib.import_module(name)
         if mod.gather(out)["studies"]:
             mod.write_page(out)

@@ -134,3 +134,39 @@ def test_modal_reference_flags_smoothed_strain_noise():
 
     bad = _modal_check(s, s, 20, 0, noise=smoothed)
     assert bad["verdict"] == "misfit" and bad["residual_autocorr"] > 0.5
+
+
+def test_fitcheck_study_records_verdicts_per_level_and_resumes(tmp_path):
+    """`studies/fitcheck.py` (2 replicates over two levels; the numbers are the plumbing's, not a calibration
+    claim): one verdict per replicate at its level, the expected verdict's share with its exact interval,
+    the 90 % intervals' hits; a rerun recomputes nothing; a bad --expect exits 2 naming the flag."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    script = repo / "studies" / "fitcheck.py"
+    args = ["--snr", "20,30", "--replicates", "2", "--out", str(tmp_path), "--quiet"]
+    run = lambda *a: subprocess.run(  # noqa: E731
+        [sys.executable, str(script), *a], capture_output=True, text=True, cwd=repo
+    )
+    r = run(*args)
+    assert r.returncode == 0, r.stderr[-3000:]
+    path = tmp_path / "fitcheck" / "exeter-deflection-snr20_30.json"
+    doc = json.loads(path.read_text())
+    assert [x["snr_db"] for x in doc["records"]] == [20.0, 30.0]
+    assert all(x["verdict"] in ("fits", "misfit") and 0 < x["p_value"] <= 1 for x in doc["records"])
+    s = doc["summary"]
+    assert s["replicates"] == 2 and s["expected"] == sum(
+        x["verdict"] == "fits" for x in doc["records"]
+    )
+    lo, hi = s["share_ci95"]
+    assert 0 <= lo <= s["share"] <= hi <= 1 and set(s["by_snr"]) == {"20", "30"}
+    assert set(s["coverage"]) == {"EI"} and 0 <= s["coverage"]["EI"]["hits"] <= 2
+    assert "exeter-deflection-snr20_30" in (tmp_path / "fitcheck.md").read_text()
+    before = [x["time_s"] for x in doc["records"]]
+    assert run(*args).returncode == 0
+    assert [x["time_s"] for x in json.loads(path.read_text())["records"]] == before
+    bad = run(*args, "--expect", "maybe")
+    assert bad.returncode == 2 and "--expect" in bad.stderr and "Traceback" not in bad.stderr
