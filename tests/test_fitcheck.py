@@ -170,3 +170,22 @@ def test_fitcheck_study_records_verdicts_per_level_and_resumes(tmp_path):
     assert [x["time_s"] for x in json.loads(path.read_text())["records"]] == before
     bad = run(*args, "--expect", "maybe")
     assert bad.returncode == 2 and "--expect" in bad.stderr and "Traceback" not in bad.stderr
+
+
+def test_a_misfit_report_heads_with_the_alert_and_draws_the_residuals(tmp_path):
+    """The report of a misfit run: the alert first, pointing to the residual figure, which is written; a
+    well-specified run's report has the figure but no alert (the negative control)."""
+    d = bp.resolve("deflection")
+    two = dataclasses.replace(
+        d, vehicle=Vehicle(d.vehicle.speed, (Axle(37000.0, 0.0), Axle(15000.0, 3.0)))
+    )
+    for cfg_true, misfit in ((two, True), (d, False)):
+        data = bp.simulate(cfg_true, 30, 0)
+        res = bp.analyse(data, d, methods="modal", seed=0)
+        out = bp.write_run(res, tmp_path / str(misfit))
+        md = (out / "report.md").read_text(encoding="utf-8")
+        assert (out / "fig_residuals.png").stat().st_size > 0
+        assert ("The data contradict the model" in md) is misfit
+        if misfit:
+            head = md.split("\n## ", 1)[0]
+            assert "The data contradict the model" in head and "fig_residuals.png" in head

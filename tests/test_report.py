@@ -27,7 +27,12 @@ from bayespinn.uq.modal_mcmc import ModalPredictor
 from bayespinn.uq.posterior import Posterior
 from bayespinn.uq.predictive import fe_truth
 
-RUN_FIGURES = ("fig_posteriors.png", "fig_data_fit.png", "fig_span_profiles.png")
+RUN_FIGURES = (
+    "fig_posteriors.png",
+    "fig_residuals.png",
+    "fig_data_fit.png",
+    "fig_span_profiles.png",
+)
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 #: Table 5 oracle: exact arithmetic on float64 profiles of ~1e-3 m and ~1e5 N m
 ORACLE_TOL = 1e-9
@@ -153,7 +158,8 @@ def test_verdict_identifiability_and_missing_predictor(defl, tmp_path):
     fake = _pinn_like(cfg, res)
     write_reports(fake, cfg, tmp_path)
     md = (tmp_path / "report.md").read_text(encoding="utf-8")
-    html = assert_self_contained(tmp_path, RUN_FIGURES)
+    # its summary entries carry no fit check, so no residual figure
+    html = assert_self_contained(tmp_path, [f for f in RUN_FIGURES if f != "fig_residuals.png"])
     for text in (md, html):
         assert "EI is not identified by these data" in text
         assert "Deep ensemble DISAGREES with the modal reference" in text
@@ -185,7 +191,7 @@ def test_a_failing_figure_does_not_lose_the_report(defl, tmp_path, monkeypatch, 
         if r.levelno == logging.WARNING
     )
     assert not (tmp_path / "fig_span_profiles.png").exists()
-    assert_self_contained(tmp_path, ("fig_posteriors.png", "fig_data_fit.png"))
+    assert_self_contained(tmp_path, ("fig_posteriors.png", "fig_residuals.png", "fig_data_fit.png"))
     assert "simulated drawing failure" in (tmp_path / "report.md").read_text(encoding="utf-8")
 
 

@@ -67,7 +67,8 @@ def alerts(summary: dict) -> list[Block]:
                     "these intervals assume a model the data contradict. The residuals keep structure that "
                     "a uniform pinned beam under the stated loads with white noise cannot leave "
                     f"(lag-1 autocorrelation {fc['residual_autocorr']:+.2f}); read EI as conditional on "
-                    "that model, not as a measurement of the girder."
+                    "that model, not as a measurement of the girder. The residual figure "
+                    "(`fig_residuals.png`, under Figures) shows what the model leaves unexplained."
                 )
             )
     for key, why in not_identified(summary["methods"]):
