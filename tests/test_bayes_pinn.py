@@ -484,10 +484,14 @@ def test_ensemble_interval_is_calibrated_when_members_are_posterior_draws():
     assert not lo <= hits_ctrl <= hi, (hits_ctrl, lo, hi)
 
 
+#: the shared and the own fit of one seed agree to this relative tolerance, their NUTS draws to SAME_DRAWS
+SAME_FIT, SAME_DRAWS = 1e-10, 1e-4
+
+
 def test_bpinn_shares_the_ensembles_fit_and_is_the_same_function_of_the_seed():
     """Run after the ensemble on the same data, the B-PINN takes the ensemble's member 0 fit instead of
-    training its own (issue 25); alone, it computes that very fit itself: the posterior is the same bit for
-    bit, and only the time it spent training differs. A different seed gives a different fit (the control)."""
+    training its own (issue 25); alone, it computes that very fit itself: the posterior is the same up to
+    the last bits of torch's arithmetic in another process, and only the time it spent training differs. A different seed gives a different fit (the control)."""
     import bayespinn as bp
     from bayespinn.uq import shared_fit
 
@@ -500,12 +504,18 @@ def test_bpinn_shares_the_ensembles_fit_and_is_the_same_function_of_the_seed():
     after = both.posteriors["bpinn"]
     assert alone.diagnostics["warm_start"].startswith("own fit")
     assert after.diagnostics["warm_start"].startswith("shared")
-    assert np.array_equal(alone.EI, after.EI) and np.array_equal(alone.sigma, after.sigma)
+    # the same fit computed in a pool worker and in this process: torch's CPU kernels are not bit-reproducible
+    # across processes (measured here: fit EI 1.4e-14 apart, relative), and NUTS carries that to ~1e-6
+    # in the draws; SAME_FIT and SAME_DRAWS sit far below a posterior sd (about 1e-2 relative)
+    fa, fb = alone.diagnostics["fit_EI"], after.diagnostics["fit_EI"]
+    assert abs(fa / fb - 1) < SAME_FIT
+    assert np.allclose(alone.EI, after.EI, rtol=SAME_DRAWS, atol=0)
+    assert np.allclose(alone.sigma, after.sigma, rtol=SAME_DRAWS, atol=0)
     assert after.diagnostics["fit_runtime_s"] == 0.0 < alone.diagnostics["fit_runtime_s"]
     assert both.manifest["time_breakdown_s"]["bpinn"]["training"] == 0.0
     shared_fit.clear()
     other = bp.analyse(data, cfg, methods="bpinn", seed=6, profile="smoke").posteriors["bpinn"]
-    assert other.diagnostics["fit_EI"] != alone.diagnostics["fit_EI"]
+    assert abs(other.diagnostics["fit_EI"] / fa - 1) > 100 * SAME_FIT
 
 
 @pytest.mark.parametrize("noise_factor", [1.0, 30.0])
