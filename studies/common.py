@@ -355,3 +355,38 @@ def inside(ci, v) -> bool | None:
 def key_of(method: str) -> str:
     """Summary key of a CLI method name."""
     return methods.get(method).key
+
+
+# ------------------------------------------------------------------------------ replicate studies
+def run_replicates(doc: dict, path: Path, n: int, compute, summarise, tag: str) -> dict:
+    """Compute replicates 0..n-1 not yet in doc["records"] (`compute(i)` returns one record with its
+    "index"), rewriting the study file atomically after each so an interruption loses at most the replicate
+    under way; the summary (`summarise(doc)`) is kept current."""
+    done = {r["index"] for r in doc["records"]}
+    for i in range(n):
+        if i in done:
+            continue
+        doc["records"].append(compute(i))
+        doc["records"].sort(key=lambda r: r["index"])
+        doc["summary"] = summarise(doc)
+        write_json(path, doc)
+        log.info("[%s] replicate %d of %d", tag, i + 1, n)
+    doc["summary"] = summarise(doc)
+    write_json(path, doc)
+    return doc
+
+
+def gather_studies(folder: Path, schema: str, today: str, summarise) -> dict:
+    """Every study file of `schema` under `folder` with records, summarised (without its records and
+    configuration values), each marked fresh when all its replicates were computed by code `today`."""
+    studies = {}
+    for f in sorted(folder.glob("*.json")) if folder.is_dir() else []:
+        doc = json.loads(f.read_text(encoding="utf-8"))
+        if doc.get("schema") != schema or not doc.get("records"):
+            continue
+        studies[f.stem] = {
+            **{k: v for k, v in doc.items() if k not in ("records", "config_values")},
+            "summary": summarise(doc),
+            "fresh": all(r.get("code_version") == today for r in doc["records"]),
+        }
+    return studies

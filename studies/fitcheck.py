@@ -189,36 +189,22 @@ def run_study(args, argv, levels) -> dict:
         records=kept,
         provenance=c.provenance(__file__, argv, args, methods=["modal_mcmc"]),
     )
-    done = {r["index"] for r in kept}
     opts = c.run_options(args)
-    for i in range(args.replicates):
-        if i in done:
-            continue
-        doc["records"].append(replicate(cfg, levels, args.seed, i, opts))
-        doc["records"].sort(key=lambda r: r["index"])
-        doc["summary"] = summarise(doc)
-        c.write_json(path, doc)  # atomic: an interruption loses at most the replicate under way
-        log.info("[fitcheck] replicate %d of %d", i + 1, args.replicates)
-    doc["summary"] = summarise(doc)
-    c.write_json(path, doc)
-    return doc
+    return c.run_replicates(
+        doc,
+        path,
+        args.replicates,
+        lambda i: replicate(cfg, levels, args.seed, i, opts),
+        summarise,
+        "fitcheck",
+    )
 
 
 def gather(out: Path) -> dict:
     """Every fit-check study under <out>/fitcheck, summarised, each marked fresh when all its replicates
     were computed by today's code of the modal reference and the check."""
     today = code_version()
-    studies = {}
-    folder = out / "fitcheck"
-    for f in sorted(folder.glob("*.json")) if folder.is_dir() else []:
-        doc = json.loads(f.read_text(encoding="utf-8"))
-        if doc.get("schema") != STUDY_SCHEMA or not doc.get("records"):
-            continue
-        studies[f.stem] = {
-            **{k: v for k, v in doc.items() if k not in ("records", "config_values")},
-            "summary": summarise(doc),
-            "fresh": all(r.get("code_version") == today for r in doc["records"]),
-        }
+    studies = c.gather_studies(out / "fitcheck", STUDY_SCHEMA, today, summarise)
     return {"schema": SCHEMA, "studies": studies}
 
 

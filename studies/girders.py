@@ -167,36 +167,22 @@ def run_study(args, argv, snr) -> dict:
         records=kept,
         provenance=c.provenance(__file__, argv, args, methods=["modal_mcmc"]),
     )
-    done = {r["index"] for r in kept}
     opts = c.run_options(args, snr)
-    for i in range(args.replicates):
-        if i in done:
-            continue
-        doc["records"].append(replicate(cfg, snr, args.seed, i, opts))
-        doc["records"].sort(key=lambda r: r["index"])
-        doc["summary"] = summarise(doc)
-        c.write_json(path, doc)  # atomic: an interruption loses at most the replicate under way
-        log.info("[girders] replicate %d of %d", i + 1, args.replicates)
-    doc["summary"] = summarise(doc)
-    c.write_json(path, doc)
-    return doc
+    return c.run_replicates(
+        doc,
+        path,
+        args.replicates,
+        lambda i: replicate(cfg, snr, args.seed, i, opts),
+        summarise,
+        "girders",
+    )
 
 
 def gather(out: Path) -> dict:
     """Every girder study under <out>/girders, summarised, each marked fresh when all its replicates were
     computed by today's code of the modal reference."""
     today = c.code_versions(["modal_mcmc"])["modal_mcmc"]
-    studies = {}
-    for f in sorted((out / "girders").glob("*.json")) if (out / "girders").is_dir() else []:
-        doc = json.loads(f.read_text(encoding="utf-8"))
-        if doc.get("schema") != STUDY_SCHEMA or not doc.get("records"):
-            continue
-        fresh = all(r.get("code_version") == today for r in doc["records"])
-        studies[f.stem] = {
-            **{k: v for k, v in doc.items() if k not in ("records", "config_values")},
-            "summary": summarise(doc),
-            "fresh": fresh,
-        }
+    studies = c.gather_studies(out / "girders", STUDY_SCHEMA, today, summarise)
     return {"schema": SCHEMA, "studies": studies}
 
 
