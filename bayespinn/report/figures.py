@@ -15,46 +15,31 @@ Files stay SI; axes show GN m^2, mm, kN m and microstrain. Every figure is drawn
 
 from __future__ import annotations
 
-import io
 import logging
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from .. import methods
-from ..config import Config, Sensor, snr_label
+from ..config import Config, Sensor
 from ..uq import predictive as pv
-from .files import write_bytes
+from .canvas import (
+    TRUTH_STYLE,
+    FigureFile,
+    NotApplicable,
+    SkipFigure,
+    _color,
+    _gauges_in_data,
+    _new_figure,
+    _save,
+    _subtitle,
+)
+from .residuals import residuals_figure
 from .units import DISPLAY, name, sigma_unit
 
 log = logging.getLogger(__name__)
 
-TRUTH_STYLE = {"color": "black", "ls": "--", "lw": 1.3}
-DPI = 110
 #: points along the span / along time for the curves
 N_SPAN, N_TIME = 161, 400
-
-
-class SkipFigure(Exception):
-    """Nothing to draw (e.g. no method has a predictor); the message says why."""
-
-
-class NotApplicable(SkipFigure):
-    """A figure of a quantity this run did not infer: left out without a note."""
-
-
-@dataclass(frozen=True)
-class FigureFile:
-    """A figure written into the folder: file name, title and a caption with what it shows."""
-
-    name: str
-    title: str
-    caption: str
-
-
-def _color(key: str) -> str:
-    return methods.colour(key)
 
 
 def _band(ax, s, mean, lo, hi, f: float, key: str, lw: float, mean_label: bool = True) -> None:
@@ -67,28 +52,9 @@ def _band(ax, s, mean, lo, hi, f: float, key: str, lw: float, mean_label: bool =
     )
 
 
-def _new_figure(w: float, h: float):
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(w, h), dpi=DPI, layout="constrained")
-
-
-def _save(fig, path: Path) -> None:
-    """PNG written atomically, without the software tag (so the bytes depend only on the content)."""
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=DPI, metadata={"Software": None})
-    write_bytes(path, buf.getvalue())
-
-
 def _true_load(result) -> float:
     """The crossing's true axle-load factor (1 unless the loads were uncertain and drawn)."""
     return float((result.truth or {}).get("load_factor", 1.0))
-
-
-def _subtitle(result) -> str:
-    s = result.summary
-    snr = f"SNR {snr_label(s.get('snr_db'))}" + (" dB" if s.get("snr_db") is not None else "")
-    return f"{s['case']} case, {snr if result.truth is not None else 'measured data'}, seed {s['seed']}"
 
 
 # ---------------------------------------------------------------------------------------------- (a)
@@ -149,28 +115,6 @@ def posteriors_figure(result, cfg: Config, path: Path, rng: np.random.Generator)
 
 
 # ---------------------------------------------------------------------------------------------- (b)
-def _gauges_in_data(data) -> list[tuple[str, float, float, np.ndarray]]:
-    """(label, x, y, row mask) for each distinct strain gauge in the data."""
-    s = data.is_strain
-    out = []
-    keys = sorted(
-        {
-            (data.sensor[i], round(float(data.x[i]), 6), round(float(data.y[i]), 6))
-            for i in np.flatnonzero(s)
-        },
-        key=lambda k: (k[0], k[1], k[2]),
-    )
-    for nm, x, y in keys:
-        m = (
-            s
-            & (data.sensor == nm)
-            & np.isclose(data.x, x, atol=1e-6)
-            & np.isclose(data.y, y, atol=1e-6)
-        )
-        out.append((nm or f"x = {x:.2f} m, y = {y:+.3f} m", x, y, m))
-    return out
-
-
 def data_fit_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> str:
     """Data against the posterior predictive (90 % band, noise included), per method with a predictor."""
     posts = pv.with_predictor(result.posteriors)
@@ -459,54 +403,6 @@ def ei_load_figure(result, cfg: Config, path: Path, rng: np.random.Generator) ->
     return (
         "Posterior draws of EI against the common axle-load factor: along the ridge EI / load is what "
         "the quasi-static response fixes; the star marks the truth where known."
-    )
-
-
-def residuals_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> str:
-    """Standardised residuals at the posterior mean prediction (what the fit check judges), against time
-    and position, one row per method with a fit check; each row titled with its verdict."""
-    from ..uq.fitcheck import mean_prediction
-
-    checks = {k: m["fit_check"] for k, m in result.summary["methods"].items() if m.get("fit_check")}
-    if not checks:
-        raise NotApplicable("no method has a fit check")
-    data = result.data
-    gauges = _gauges_in_data(data) if data.is_strain.any() else [("points", 0, 0, ~data.is_strain)]
-    fig = _new_figure(9.0, 2.9 * len(checks) + 0.6)
-    axes = fig.subplots(len(checks), 2, squeeze=False)
-    for row, (key, fc) in zip(axes, checks.items(), strict=True):
-        post = result.posteriors[key]
-        seed = result.summary.get("seed")
-        mu = mean_prediction(post, data, seed=seed if isinstance(seed, int) else 0)
-        sigma = float(np.median(post.sigma))
-        r = (np.asarray(data.value, float) - mu) / sigma
-        for label, _, _, rows in gauges:
-            order = np.argsort(data.t[rows], kind="stable")
-            style = (
-                {"lw": 0.7} if data.is_strain.any() else {"ls": "none", "marker": "o", "ms": 2.5}
-            )
-            row[0].plot(data.t[rows][order], r[rows][order], label=label, **style)
-            row[1].plot(data.x[rows], r[rows], "o", ms=2.5, label=label)
-        for ax, xl in zip(row, ("time t (s)", "position x (m)"), strict=True):
-            ax.axhline(0.0, color="black", lw=0.8)
-            for s in (-2.0, 2.0):
-                ax.axhline(s, color="grey", lw=0.8, ls=":")
-            ax.set_xlabel(xl)
-            ax.set_ylabel("residual / σ")
-        row[0].set_title(
-            f"{name(key)}: {fc['verdict']} (p = {fc['p_value']:.2g}, lag-1 autocorrelation "
-            f"{fc['residual_autocorr']:+.2f})",
-            fontsize=9,
-        )
-        if len(gauges) > 1:
-            row[0].legend(fontsize=7, loc="upper right", ncol=2)
-    fig.suptitle(f"Residuals at the posterior mean prediction ({_subtitle(result)})", fontsize=11)
-    _save(fig, path)
-    return (
-        "Measured minus the posterior mean prediction, in units of the posterior median σ, against time "
-        "and position; dotted: ±2. Under the model these are white noise: a smooth shape (a support, a "
-        "softer segment, a missing axle) or runs of one sign (noise correlated in time) are what the fit "
-        "check flags."
     )
 
 

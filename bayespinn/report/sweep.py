@@ -16,8 +16,8 @@ from .. import methods
 from ..config import Config, resolve, snr_label
 from ..uq.agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement
 from ..uq.table5 import table5
+from .canvas import DPI, TRUTH_STYLE
 from .document import Alert, Block, BulletList, Figure, Heading, Paragraph, table
-from .figures import DPI, TRUTH_STYLE
 from .files import write_bytes, write_text
 from .html import render_html
 from .markdown import render_markdown
