@@ -33,7 +33,7 @@ from pathlib import Path
 
 import common as c
 import numpy as np
-from girders import parameters, power, region
+from girders import coverage_rows, parameters
 from scipy import stats
 
 from bayespinn.codeversion import method_version
@@ -117,17 +117,7 @@ def summarise(doc: dict) -> dict:
     overall = _share(recs, expect)
     need = REQUIRED_SHARE[expect]
     levels = sorted({r["snr_db"] for r in recs}, key=c.snr_key)
-    coverage = {}
-    for k in sorted({k for r in recs for k in r["hits"]}):
-        h = [r["hits"][k] for r in recs if k in r["hits"]]
-        lo, hi = region(len(h))
-        coverage[k] = {
-            "replicates": len(h),
-            "hits": int(sum(h)),
-            "region": [lo, hi],
-            "inside": bool(lo <= sum(h) <= hi),
-            "power_vs_80pct": power(len(h)),
-        }
+    coverage = coverage_rows(recs)
     return {
         **overall,
         "required_share": need,

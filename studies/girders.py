@@ -97,12 +97,10 @@ def replicate(cfg, snr: float | None, seed: int, i: int, opts) -> dict:
     }
 
 
-def summarise(doc: dict) -> dict:
-    recs = doc["records"]
-    n = len(recs)
-    names = sorted({k for r in recs for k in r["hits"]})
+def coverage_rows(recs: list[dict]) -> dict:
+    """Per parameter over the records' `hits`: hits, replicates, the 99 % region, inside or not, power."""
     rows = {}
-    for k in names:
+    for k in sorted({k for r in recs for k in r["hits"]}):
         h = [r["hits"][k] for r in recs if k in r["hits"]]
         lo, hi = region(len(h))
         rows[k] = {
@@ -112,6 +110,13 @@ def summarise(doc: dict) -> dict:
             "inside": bool(lo <= sum(h) <= hi),
             "power_vs_80pct": power(len(h)),
         }
+    return rows
+
+
+def summarise(doc: dict) -> dict:
+    recs = doc["records"]
+    n = len(recs)
+    rows = coverage_rows(recs)
     pd = np.array([r["p_damaged"] for r in recs if r["p_damaged"]], float)
     return {
         "replicates": n,
