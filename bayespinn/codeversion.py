@@ -16,6 +16,7 @@ from __future__ import annotations
 import ast
 import functools
 import hashlib
+import sys
 from pathlib import Path
 
 PACKAGE = "bayespinn"
@@ -115,11 +116,25 @@ def _strip_docstrings(tree: ast.AST) -> ast.AST:
     return tree
 
 
+def _dump(tree: ast.AST) -> str:
+    """`ast.dump` as Python 3.11 writes it, on any later Python too: 3.12 added the (here always empty)
+    `type_params` field to functions and classes, and 3.13 hides empty fields unless told to show them, so
+    the same source would otherwise get another code version under another Python (a GPU machine's 3.12)."""
+    kw = {}
+    if sys.version_info >= (3, 12):
+        for node in ast.walk(tree):
+            if "type_params" in node._fields and not getattr(node, "type_params", None):
+                delattr(node, "type_params")
+    if sys.version_info >= (3, 13):
+        kw["show_empty"] = True
+    return ast.dump(tree, annotate_fields=False, **kw)
+
+
 @functools.cache
 def _module_digest(module: str) -> str:
     path = module_path(module)
     tree = _strip_docstrings(ast.parse(path.read_text(encoding="utf-8")))
-    return hashlib.sha256(ast.dump(tree, annotate_fields=False).encode()).hexdigest()
+    return hashlib.sha256(_dump(tree).encode()).hexdigest()
 
 
 def code_version(*modules: str) -> str:

@@ -75,6 +75,31 @@ def cpu_count() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+def _context():
+    """How the local pool starts its workers: forked (fast), unless this process has used CUDA, whose
+    autograd threads a forked child cannot inherit (torch refuses): then spawned afresh."""
+    import multiprocessing as mp
+    import sys
+
+    torch = sys.modules.get("torch")
+    if torch is not None and torch.cuda.is_initialized():
+        _open_files_limit()  # workers send tensors back as shared memory, one descriptor each
+        return mp.get_context("spawn")
+    return None
+
+
+def _open_files_limit() -> None:
+    """Raise this process's soft limit on open files to the hard limit."""
+    try:
+        import resource
+
+        soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+        if soft != hard:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (hard, hard))
+    except (ImportError, OSError, ValueError):  # pragma: no cover - not POSIX, or not allowed
+        pass
+
+
 @dataclass(frozen=True)
 class Executor:
     """kind 'local' (process pool of `workers`, default one per core) or 'ray' (`address`, e.g. 'auto').
@@ -125,7 +150,9 @@ class Executor:
             bar.close()
             return out
         results: list = [None] * len(tasks)
-        with ProcessPoolExecutor(max_workers=n, initializer=_single_thread) as pool:
+        with ProcessPoolExecutor(
+            max_workers=n, initializer=_single_thread, mp_context=_context()
+        ) as pool:
             futs = {pool.submit(fn, t): i for i, t in enumerate(tasks)}
             try:
                 for f in as_completed(futs):

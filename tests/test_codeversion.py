@@ -68,3 +68,17 @@ def test_the_root_package_init_is_not_followed(tmp_path, monkeypatch):
     cv._module_digest.cache_clear()
     assert cv.code_version("bayespinn.uq.m") != v0
     cv._module_digest.cache_clear()
+
+
+def test_ast_dump_is_python_311s_on_any_python():
+    """The code version of a source does not depend on the Python that reads it (3.12 adds empty
+    `type_params` to functions and classes, 3.13 hides empty fields): the dump is 3.11's."""
+    import ast
+
+    from bayespinn.codeversion import _dump
+
+    tree = ast.parse("class A:\n    def f(self):\n        pass\n")
+    assert _dump(tree) == (
+        "Module([ClassDef('A', [], [], [FunctionDef('f', arguments([], [arg('self')], kwonlyargs=[], "
+        "kw_defaults=[], defaults=[]), [Pass()], [])], [])], [])"
+    )

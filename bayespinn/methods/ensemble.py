@@ -30,6 +30,35 @@ class DeepEnsemble(Method):
     display = "Deep ensemble"
     colour = "#c0392b"
     Settings = EnsembleSettings
+    modules = ("bayespinn.methods.ensemble", "bayespinn.uq.ensemble_batch")
+
+    def batches(self) -> bool:
+        """On a GPU the members of many datasets' ensembles train as one network (`ensemble_batch`)."""
+        from ..uq.ensemble import _batched
+
+        return _batched(self.settings.device)
+
+    def infer_many(self, datas, config, *, seeds):
+        """The posterior of each dataset (same girder model, one seed each): on a GPU their ensembles train
+        as one network (`uq.ensemble_batch.ensemble_posteriors`), elsewhere `infer` runs on each in turn."""
+        if not self.batches():
+            return [self.infer(d, config, seed=sd) for d, sd in zip(datas, seeds, strict=True)]
+        from ..uq.ensemble_batch import ensemble_posteriors
+        from ..uq.priors import NoisePrior
+        from ..uq.shared_fit import ensemble_seed
+
+        s = self.settings
+        return ensemble_posteriors(
+            list(datas),
+            config,
+            seeds=[ensemble_seed(sd) for sd in seeds],
+            noises=[NoisePrior.build(s.noise_prior, d.value, s.snr_db) for d in datas],
+            members=s.members,
+            profile=s.profile,
+            device=s.device,
+            executor=self.executor,
+            progress=self.progress,
+        )
 
     def infer(self, data, config, *, seed):
         from ..uq.ensemble import ensemble_posterior

@@ -15,7 +15,7 @@ from .losses import Objective
 from .network import PINN
 from .problem import Problem, Scales
 from .settings import PROFILES, TrainSettings
-from .train import FitResult, fit
+from .train import FitResult, fit, networks_per_batch
 
 __all__ = [
     "PINN",
@@ -27,4 +27,5 @@ __all__ = [
     "TrainSettings",
     "beta_bias_factor",
     "fit",
+    "networks_per_batch",
 ]

@@ -72,13 +72,15 @@ class Problem:
     ----------
     beam : the girder (beam.EI is *not* used: it is the unknown)
     vehicle : the axles and speed
-    data : Measurements, or a tuple of M Measurements sharing x, t, kind and y (different values, e.g.
-        perturbed copies for the M members of an ensemble trained together)
+    data : Measurements, or a tuple of M Measurements with the same rows' kind and y (different values, e.g.
+        perturbed copies for the M members of an ensemble trained together, or different sample points
+        x, t: the datasets of several ensembles trained as one network)
     EI_ref : float, reference rigidity [N m^2] (the prior median); the network starts at EI_ref
     beta : float or None, Gaussian delta width [m] (paper Eq. 5); None: the training settings' beta_rel L
     noise_sd : float or None, measurement noise sd (units of the values). When given, the objective is
         *posterior-scaled*: sum over data of (r / noise_sd)^2 / 2, physics penalties scaled by the same
-        factor, plus the prior term (see `losses.Objective`)
+        factor, plus the prior term (see `losses.Objective`). A sequence gives one sd per member (members
+        that belong to different datasets, trained as one network)
     anchor : None or (loc, sd): a Gaussian term 0.5 ((log EI - loc) / sd)^2 on log EI [log N m^2];
         loc may be a sequence (M,), one anchor per member
     duration : float or None, T [s]; default max(vehicle duration, last data time)
@@ -89,7 +91,7 @@ class Problem:
     data: Measurements | tuple[Measurements, ...]
     EI_ref: float = 1.0e9
     beta: float | None = None
-    noise_sd: float | None = None
+    noise_sd: float | Sequence[float] | None = None
     anchor: tuple[float | Sequence[float], float] | None = None
     duration: float | None = None
 
@@ -98,16 +100,25 @@ class Problem:
         first = data[0]
         for d in data[1:]:
             if len(d) != len(first) or not (
-                np.array_equal(d.x, first.x) and np.array_equal(d.t, first.t)
+                np.array_equal(d.kind, first.kind) and np.array_equal(d.y, first.y, equal_nan=True)
             ):
-                raise ValueError("all Measurements of a Problem must share the same x and t")
+                raise ValueError(
+                    "all Measurements of a Problem must have the same number of rows of the same kinds "
+                    "(kind and y per row)"
+                )
         object.__setattr__(self, "data", tuple(data) if len(data) > 1 else first)
         if self.beta is not None and not (self.beta > 0 and math.isfinite(self.beta)):
             raise ValueError(f"beta must be a finite width > 0 m, got {self.beta}")
-        if self.noise_sd is not None and not self.noise_sd > 0:
-            raise ValueError(f"noise_sd must be > 0, got {self.noise_sd}")
+        if self.noise_sd is not None:
+            sds = np.atleast_1d(np.asarray(self.noise_sd, float))
+            if sds.ndim != 1 or not np.all(sds > 0) or not np.all(np.isfinite(sds)):
+                raise ValueError(
+                    f"noise_sd must be > 0 (or a sequence of sds > 0), got {self.noise_sd}"
+                )
+            if np.ndim(self.noise_sd):
+                object.__setattr__(self, "noise_sd", tuple(float(v) for v in sds))
         if self.duration is None:
-            T = max(self.vehicle.duration(self.beam.length), float(first.t.max()))
+            T = max(self.vehicle.duration(self.beam.length), max(float(d.t.max()) for d in data))
             object.__setattr__(self, "duration", T)
 
     @classmethod
@@ -204,10 +215,18 @@ class Problem:
         if len(ds) == 1:
             vals = np.repeat(vals, members, axis=0)
         t = lambda a: torch.as_tensor(np.array(a, float), dtype=dtype, device=device)  # noqa: E731
-        xi = np.broadcast_to(ds[0].x / sc.L, (members, len(s)))
-        tau = np.broadcast_to(ds[0].t / sc.T, (members, len(s)))
+        xi = np.stack([d.x for d in ds]) / sc.L  # each member's own sample points
+        tau = np.stack([d.t for d in ds]) / sc.T
+        if len(ds) == 1:
+            xi, tau = (np.broadcast_to(a, (members, len(s))) for a in (xi, tau))
         noise = None
-        if self.noise_sd is not None:
+        if isinstance(self.noise_sd, tuple):  # one sd per member
+            if len(self.noise_sd) != members:
+                raise ValueError(
+                    f"Problem holds {len(self.noise_sd)} noise sds, cannot train {members} members"
+                )
+            noise = t([0.5 * float(np.sum((s / sd) ** 2)) for sd in self.noise_sd])
+        elif self.noise_sd is not None:
             noise = 0.5 * float(np.sum((s / self.noise_sd) ** 2))
         anchor = None
         if self.anchor is not None:
@@ -241,7 +260,7 @@ class ProblemTensors:
     xi, tau : (M, P) data coordinates; a_u, a_xx : (P,) weights so that the scaled observation is
     a_u w + a_xx w_xixi; value : (M, P) scaled observed values; data_scale : None, or the factor
     0.5 sum_i (s_i / sigma)^2 that turns the mean squared scaled residual into the Gaussian negative log
-    likelihood; anchor : None or ((M,) loc of log(EI/EI_ref), sd); loads (J,) axle loads / P;
+    likelihood (a float, or a tensor (M,) when the members' noise sds differ); anchor : None or ((M,) loc of log(EI/EI_ref), sd); loads (J,) axle loads / P;
     delays (J,) entry times / T; speed v T / L; beta / L (a 0-d tensor, so a
     training schedule can change it in place without recompiling); stiffness = 1/48 and inertia coefficients;
     pde_norm : 'peak' (PDE residual divided by the peak Gaussian intensity) or 'load' (by q = P / L).
@@ -254,7 +273,7 @@ class ProblemTensors:
     value: torch.Tensor
     needs_curvature: bool
     needs_value: bool
-    data_scale: float | None
+    data_scale: float | torch.Tensor | None
     anchor: tuple[torch.Tensor, float] | None
     loads: torch.Tensor
     delays: torch.Tensor

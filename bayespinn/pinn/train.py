@@ -52,7 +52,7 @@ class FitResult:
     EI : float (single network) or array (M,) (``members=M``): estimated flexural rigidity [N m^2],
         divided by the Gaussian-delta bias factor when ``settings.correct_beta``
     EI_raw : same shape, exp(log_ei) EI_ref before the beta correction [N m^2]
-    beta_factor : float, the bias factor used (1.0 when not corrected)
+    beta_factor : float, the bias factor used (1.0 when not corrected); an array (G,) for a fit of G seeds
     losses : dict term -> float or array (M,): final pde, ic, bc, data (+ prior) terms and 'total'
     history : dict of arrays: 'step' (R,), 'lr' (R,), each term and 'total' (R, M), 'EI_raw' (R, M)
     state : dict, the trained PINN's state_dict (CPU tensors); `model()` rebuilds the network
@@ -65,7 +65,7 @@ class FitResult:
 
     EI: float | np.ndarray
     EI_raw: float | np.ndarray
-    beta_factor: float
+    beta_factor: float | np.ndarray
     losses: dict[str, Any]
     history: dict[str, np.ndarray]
     state: dict
@@ -139,6 +139,17 @@ def _member_seeds(
     return out
 
 
+def _seeds(seed, members: int, first: int = 0) -> list[tuple[int, int]]:
+    """Member seeds of a fit: `_member_seeds` of one seed, or, for a list of G seeds (G independent
+    ensembles trained as one network of G x k members), the k members of each seed in turn."""
+    if not isinstance(seed, list | tuple):
+        return _member_seeds(seed, members, first)
+    G = len(seed)
+    if G < 1 or members % G:
+        raise ValueError(f"{members} members cannot be split evenly over {G} seeds")
+    return [s for g in seed for s in _member_seeds(g, members // G, first)]
+
+
 def _resolve_device(device: str | torch.device) -> torch.device:
     if str(device) == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -165,7 +176,7 @@ class _Trainer:
     ):
         self.problem, self.s, self.M, self.device = problem, s, members, device
         self.dtype = _dtype(s.dtype)
-        seeds = _member_seeds(seed, members, first_member)
+        seeds = _seeds(seed, members, first_member)
         init_gens = [torch.Generator().manual_seed(a) for a, _ in seeds]
         self.col_gens = [torch.Generator().manual_seed(b) for _, b in seeds]
         self.model = _build_model(problem, s, members, init_gens).to(device)
@@ -188,7 +199,9 @@ class _Trainer:
                 {"params": self.hidden + head_params},
                 {"params": [self.model.log_ei], "lr_factor": s.lr_ei_factor},
             ]
-        self.adam = torch.optim.Adam(groups, lr=s.lr)
+        # on a GPU one fused kernel updates every parameter (launches, not arithmetic, bound the step)
+        fused = {"fused": True} if device.type == "cuda" else {}
+        self.adam = torch.optim.Adam(groups, lr=s.lr, **fused)
         self.lbfgs: torch.optim.LBFGS | None = None
         self.col: Collocation | None = None
         self.prev_terms: dict | None = None
@@ -296,14 +309,15 @@ class _Trainer:
         return total, per, terms
 
     def guard(self, total: torch.Tensor, where: str) -> None:
-        bad = not bool(torch.isfinite(total))
-        if not bad:
-            for p in self.model.parameters():
-                if not bool(torch.isfinite(p).all()):
-                    bad = True
-                    break
+        # one device-to-host read per step (a GPU waits for each): every check as one tensor
         lei = self.model.log_ei.detach()
-        if bad or bool((lei.abs() > self.s.max_log_ei).any()):
+        finite = torch.stack(
+            [torch.isfinite(total).all()]
+            + [torch.isfinite(p).all() for p in self.model.parameters()]
+        ).all()
+        far = (lei.abs() > self.s.max_log_ei).any()
+        if bool(far | ~finite):
+            bad = not bool(finite)
             what = (
                 f"non-finite loss or parameter (loss = {float(total):.3g})"
                 if bad
@@ -452,7 +466,10 @@ def fit(
     problem : Problem, the girder, axles, (possibly perturbed) data, EI_ref and optional noise sd /
         anchor (posterior-scaled objective, see `losses`)
     settings : TrainSettings, or a profile name ('smoke', 'fast', 'paper'); default 'fast'
-    seed : int or numpy SeedSequence; member m uses independent streams derived from (seed, m)
+    seed : int or numpy SeedSequence; member m uses independent streams derived from (seed, m). A list of
+        G seeds trains G independent ensembles of M / G members each as one network (the members of
+        seed g are members g M/G .. (g+1) M/G - 1 and draw their streams from (seed g, m)); each gets
+        its own beta correction (``beta_factor`` is then an array (G,))
     members : None for one network (scalar results) or M >= 1 to train M members together as one
         batched network (array results of shape (M,)); member m starts from the same weights and draws
         the same points as a single fit with the same seed would for m = 0
@@ -550,12 +567,17 @@ def fit(
     losses["total"] = per.detach().cpu().double().numpy()
     save_now()
     EI_raw = tr.EI_raw()
-    factor = 1.0
-    if s.correct_beta:
-        factor = beta_bias_factor(
-            problem.beam, problem.vehicle, problem.datasets[0], tr.beta, EI=float(np.median(EI_raw))
-        )
-    EI = EI_raw / factor
+    groups = len(seed) if isinstance(seed, list | tuple) else 1
+    factors = np.ones(groups)
+    if s.correct_beta:  # per ensemble: at its members' median, for its own sample points
+        ds = problem.datasets
+        for g, part in enumerate(np.split(EI_raw, groups)):
+            d = ds[g * len(ds) // groups] if len(ds) > 1 else ds[0]
+            factors[g] = beta_bias_factor(
+                problem.beam, problem.vehicle, d, tr.beta, EI=float(np.median(part))
+            )
+    EI = EI_raw / np.repeat(factors, M // groups)
+    factor = float(factors[0]) if groups == 1 else factors
     hist = {k: np.asarray(v) for k, v in tr.history.items()}
     runtime = elapsed0 + time.perf_counter() - t0
     single = members is None
@@ -563,16 +585,16 @@ def fit(
         (lambda a: float(np.asarray(a).reshape(-1)[0])) if single else (lambda a: np.asarray(a))
     )  # noqa: E731
     log.info(
-        "PINN fit: EI = %s N m^2 (raw %s, beta factor %.6f) in %.1f s",
+        "PINN fit: EI = %s N m^2 (raw %s, beta factor %s) in %.1f s",
         np.round(EI, 0),
         np.round(EI_raw, 0),
-        factor,
+        np.round(factor, 6),
         runtime,
     )
     return FitResult(
         EI=squeeze(EI),
         EI_raw=squeeze(EI_raw),
-        beta_factor=float(factor),
+        beta_factor=factor,
         losses={k: squeeze(v) for k, v in losses.items()},
         history=hist,
         state={k: v.detach().cpu().clone() for k, v in tr.model.state_dict().items()},
@@ -584,9 +606,42 @@ def fit(
     )
 
 
+#: networks measured by `networks_per_batch` to learn a member's memory
+PROBE_NETWORKS = 8
+
+
+def networks_per_batch(
+    problem: Problem, settings: TrainSettings, device: str | torch.device, fraction: float = 0.5
+) -> int:
+    """How many networks of `settings` on `problem` train as one on a CUDA device: `fraction` of its free
+    memory over a member's peak, measured by one eager training step and the final (larger) evaluation of
+    `PROBE_NETWORKS` members. Anywhere else there is no device memory to fill: returns 2**31 - 1."""
+    from dataclasses import replace
+
+    dev = _resolve_device(device)
+    if dev.type != "cuda":
+        return 2**31 - 1
+    torch.cuda.synchronize(dev)
+    torch.cuda.empty_cache()
+    free, _ = torch.cuda.mem_get_info(dev)
+    before = torch.cuda.memory_allocated(dev)
+    torch.cuda.reset_peak_memory_stats(dev)
+    tr = _Trainer(problem, replace(settings, compile=False), 0, PROBE_NETWORKS, dev)
+    tr.adam_step()
+    tr.set_beta(1.0)
+    tr.loss(tr.sample(FINAL_POINTS if tr.varpro else 1), exact_frequency=tr.varpro)
+    torch.cuda.synchronize(dev)
+    per = (torch.cuda.max_memory_allocated(dev) - before) / PROBE_NETWORKS
+    del tr
+    torch.cuda.empty_cache()
+    n = max(1, int(fraction * free / max(per, 1.0)))
+    log.info("a network's training takes %.0f MB on %s: %d networks per batch", per / 2**20, dev, n)
+    return n
+
+
 def rel_error(EI: float | np.ndarray, truth: float) -> float | np.ndarray:
     """Relative error (EI - truth) / truth [-]."""
     return (np.asarray(EI) - truth) / truth if np.ndim(EI) else (float(EI) - truth) / truth
 
 
-__all__ = ["FitResult", "fit", "rel_error"]
+__all__ = ["FitResult", "fit", "networks_per_batch", "rel_error"]

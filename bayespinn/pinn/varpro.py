@@ -239,7 +239,7 @@ def solve_head(
     *,
     half_width: float = 0.25,
     s_max: float = 3.0,
-    data_scale: float | None = None,
+    data_scale: float | Tensor | None = None,
     anchor: tuple[Tensor, float] | None = None,
     optimise_s: bool = True,
 ) -> tuple[Tensor, Tensor]:
@@ -250,7 +250,12 @@ def solve_head(
     """
     dd = torch.float64
     s0 = s0.detach().to(dd)
-    scale = 1.0 if data_scale is None else float(data_scale)
+    if data_scale is None:
+        scale = 1.0
+    elif torch.is_tensor(data_scale):  # one factor per member
+        scale = data_scale.detach().to(dd)
+    else:
+        scale = float(data_scale)
 
     def objective(s: Tensor) -> Tensor:
         _, J = system.solve(s)

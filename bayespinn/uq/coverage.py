@@ -66,8 +66,8 @@ def coverage_version(method: str) -> str:
     return h.hexdigest()[:12]
 
 
-def run_replicate(task: Replicate) -> dict:
-    """Simulate one dataset, infer, and score the interval against the truth."""
+def _dataset(task: Replicate):
+    """(girder with this replicate's truth, its simulated data, its seed)."""
     seq = replicate_seed(task.seed, task.snr_db, task.index)
     cfg = task.cfg
     if task.truth == "prior":
@@ -77,12 +77,54 @@ def run_replicate(task: Replicate) -> dict:
             EIPrior.from_spec(cfg.prior).sample(np.random.default_rng(seeding.stream(seq, "init")))
         )
         cfg = dataclasses.replace(cfg, beam=dataclasses.replace(cfg.beam, EI=ei))
-    data = simulate(cfg, task.snr_db, seq)
+    return cfg, simulate(cfg, task.snr_db, seq), seq
+
+
+def run_replicate(task: Replicate) -> dict:
+    """Simulate one dataset, infer, and score the interval against the truth."""
+    cfg, data, seq = _dataset(task)
     from ..pipeline import analyse
 
     m = methods.build(task.method, task.opts)
     res = analyse(data, cfg, methods=[m], seed=seq, snr_db=task.snr_db, opts=task.opts, argv=[])
-    post = res.posteriors[m.key]
+    return _score(task, cfg, res.posteriors[m.key])
+
+
+def _batches(m) -> bool:
+    """Does this method train many datasets as one batch (`infer_many`, e.g. the ensemble on a GPU)?"""
+    return bool(getattr(m, "batches", lambda: False)())
+
+
+def run_replicates_batched(tasks: list[Replicate], executor: Executor | None = None) -> list[dict]:
+    """Replicates whose method trains many datasets as one batch (its `batches()`, e.g. the ensemble on a
+    GPU): simulate every dataset, infer them together (its `infer_many`), score each as `run_replicate`
+    does. Every task must share method, options and girder model (one study's). A batch whose training
+    diverges is run again one replicate at a time, so that one bad dataset cannot sink the others."""
+    from ..errors import TrainingDiverged
+
+    if not tasks:
+        return []
+    sets = [_dataset(t) for t in tasks]
+    m = methods.build(tasks[0].method, dataclasses.replace(tasks[0].opts, executor=executor))
+    for cfg, data, _ in sets:
+        m.check(data, cfg)
+    datas, seeds = [d for _, d, _ in sets], [q for _, _, q in sets]
+    try:
+        if hasattr(m, "infer_many"):
+            posts = m.infer_many(datas, tasks[0].cfg, seeds=seeds)
+        else:
+            posts = [m.infer(d, tasks[0].cfg, seed=q) for d, q in zip(datas, seeds, strict=True)]
+    except TrainingDiverged as exc:
+        if len(tasks) == 1:
+            raise
+        log.warning(
+            "a batch of %d replicates diverged (%s): running them one by one", len(tasks), exc
+        )
+        return [run_replicate(t) for t in tasks]
+    return [_score(t, cfg, p) for t, (cfg, _, _), p in zip(tasks, sets, posts, strict=True)]
+
+
+def _score(task: Replicate, cfg: Config, post) -> dict:
     true = cfg.beam.EI
     lo, hi = post.interval(task.level)
     d = post.EI.ravel()
@@ -408,14 +450,17 @@ def coverage_study(
         for i in range(replicates)
         if i not in have
     ]
-    new = (executor or Executor()).map(
-        run_replicate,
-        tasks,
-        desc=f"coverage {method}",
-        progress=progress,
-        resources=task_resources(opts.device if method != "modal" else "cpu"),
-        on_result=(lambda i, r: ck.add(r)) if ck else None,
-    )
+    if _batches(methods.build(method, opts)):  # a GPU: many replicates as one network
+        new = _batched_study(tasks, method, opts, executor, progress, ck)
+    else:
+        new = (executor or Executor()).map(
+            run_replicate,
+            tasks,
+            desc=f"coverage {method}",
+            progress=progress,
+            resources=task_resources(opts.device if method != "modal" else "cpu"),
+            on_result=(lambda i, r: ck.add(r)) if ck else None,
+        )
     recs = sorted([have[i] for i in range(replicates) if i in have] + new, key=lambda r: r["index"])
     versions = Counter(str(r.get("code_version")) for r in recs)
     hits = int(sum(r["hit"] for r in recs))
@@ -449,6 +494,56 @@ def coverage_study(
         "fingerprint": key,
         "records": recs,
     }
+
+
+def _batched_study(tasks, method, opts, executor, progress, ck) -> list[dict]:
+    """The replicates in batches as large as the device's memory allows (`pinn.networks_per_batch`),
+    each batch one network; every record is checkpointed as its batch ends. The members' last-layer models
+    go to `executor` when it is a pool of several workers, else to a local pool of one per core."""
+    from tqdm.auto import tqdm
+
+    from ..pinn import Problem, TrainSettings, networks_per_batch
+
+    if not tasks:
+        return []
+    if executor is None or (executor.kind == "local" and (executor.workers or 0) <= 1):
+        executor = Executor("local")
+    cfg, data, _ = _dataset(tasks[0])
+    settings = TrainSettings.for_profile(opts.profile)
+    nets = networks_per_batch(Problem.from_config(cfg, data), settings, opts.device)
+    per = max(1, nets // opts.members)
+    out: list[dict] = []
+    todo = list(tasks)
+    bar = tqdm(total=len(todo), desc=f"coverage {method}", disable=not progress, unit="replicate")
+    try:
+        while todo:
+            batch = todo[:per]
+            try:
+                recs = run_replicates_batched(batch, executor)
+            except MemoryError_ as exc:
+                if per == 1:
+                    raise
+                per = max(1, per // 2)
+                import torch
+
+                torch.cuda.empty_cache()
+                log.warning("out of device memory (%s): batches of %d replicates now", exc, per)
+                continue
+            for r in recs:
+                if ck:
+                    ck.add(r)
+            out += recs
+            todo = todo[len(batch) :]
+            bar.update(len(batch))
+    finally:
+        bar.close()
+    return out
+
+
+try:  # what a device that runs out of memory raises
+    from torch.cuda import OutOfMemoryError as MemoryError_
+except ImportError:  # pragma: no cover - older torch
+    MemoryError_ = MemoryError
 
 
 #: the issues' band for an approximate posterior's sd against the reference's

@@ -38,7 +38,9 @@ parallel and a member's result depends on its seed only, not on the executor or 
 (measured on 2 cores: 5 members take 3 rounds of ~0.1 s per step against 0.35 s per step for one batched
 network on both threads). On CUDA all members train together as one batched network (weights (M, in,
 out), `torch.bmm`). The two paths give statistically equivalent but not bit-identical members: float32
-training is chaotic enough that batched and single matrix products (equal to ~1e-7) drift apart.
+training is chaotic enough that batched and single matrix products (equal to ~1e-7) drift apart. A study
+on CUDA goes further and trains the ensembles of many datasets as one network (`ensemble_batch`); the
+pieces it shares with this function (`rto_inputs`, `pooled_posterior`, `local_sd`) are defined here once.
 """
 
 from __future__ import annotations
@@ -183,11 +185,15 @@ class MemberTask:
     progress: bool = False
 
 
-def _last_layer(model, m: int, base, data: Measurements, seed, settings) -> LastLayer:
+def _last_layer(
+    model, m: int, base, data: Measurements, seed, settings, index: int | None = None
+) -> LastLayer:
+    """Member m's last-layer model (its pseudo-observation points from (seed, m)); `index` is its place in
+    `model` when that differs from m (several ensembles in one network)."""
     rng = np.random.default_rng(seeding.child(seed, "collocation", m))
     return LastLayer(
         model,
-        0 if model.members == 1 else m,
+        0 if model.members == 1 else (m if index is None else index),
         base,
         data,
         rng,
@@ -353,7 +359,7 @@ def ensemble_posterior(
     quiet = not progress
     batched = _batched(device)
     base = Problem.from_config(cfg, data)
-    s2 = replace(settings, epochs=max(1, int(RTO_FRACTION * settings.epochs)), lr=settings.lr * 0.3)
+    s2 = phase2_settings(settings)
 
     # phase 1: all members on the measured data
     log.info(
@@ -377,12 +383,7 @@ def ensemble_posterior(
         )
     if p1.fit0 is not None:  # the B-PINN on the same data starts from it (`shared_fit`)
         remember(fit_key(base, settings, member_seed(seed), 0), p1.fit0)
-    sigma_hat = float(np.median([g.mode for g in p1.grids]))
-    # phase 2: randomise-then-optimise
-    rng = np.random.default_rng(seeding.stream(seed, "noise"))
-    eta = rng.standard_normal(M)
-    anchors = ei_prior.loc + ei_prior.log_sd * eta
-    pdata = _rto_data(data, sigma_hat, M, rng)
+    sigma_hat, anchors, pdata = rto_inputs(data, p1.grids, seed, ei_prior, M)
     log.info("[ensemble] phase 2: randomise-then-optimise (sigma_hat = %.3g)", sigma_hat)
     if batched:
         problem = Problem.from_config(
@@ -425,17 +426,54 @@ def ensemble_posterior(
             "ensemble phase 2",
             not quiet,
         )
+    training = "batched (one network of M members)" if batched else "one task per member"
+    return pooled_posterior(p1, p2, sigma_hat, base, ei_prior, seed, M, training, t0)
+
+
+def local_sd(ll: LastLayer, grid: SigmaGrid, ei_prior: EIPrior) -> float:
+    """A member's own width of log EI: the sd of its last-layer marginal at its noise level's mode."""
+    return ll.local_sd_log_theta(math.log(ll.theta_fit), math.log(grid.mode), ei_prior.log_sd)
+
+
+def phase2_settings(settings):
+    """Randomise-then-optimise trains RTO_FRACTION of the profile's steps at 0.3 x its learning rate."""
+    return replace(
+        settings, epochs=max(1, int(RTO_FRACTION * settings.epochs)), lr=settings.lr * 0.3
+    )
+
+
+def rto_inputs(data: Measurements, grids: list, seed, ei_prior: EIPrior, M: int):
+    """Phase 2's inputs from phase 1's sigma grids: (sigma_hat, the M anchors of log EI, the M perturbed
+    copies of the data), all from the ensemble's seed."""
+    sigma_hat = float(np.median([g.mode for g in grids]))
+    rng = np.random.default_rng(seeding.stream(seed, "noise"))
+    eta = rng.standard_normal(M)
+    anchors = ei_prior.loc + ei_prior.log_sd * eta
+    return sigma_hat, anchors, _rto_data(data, sigma_hat, M, rng)
+
+
+def pooled_posterior(
+    p1: _Phase,
+    p2: _Phase,
+    sigma_hat: float,
+    base,
+    ei_prior: EIPrior,
+    seed,
+    M: int,
+    training: str,
+    t0: float,
+    runtime_s: float | None = None,
+    lap_sd: np.ndarray | None = None,
+) -> Posterior:
+    """The ensemble's posterior from its two phases: members' local widths (`lap_sd`, computed here from
+    phase 2's last layers unless given) pooled with their spread."""
     member_EI = p2.EI
     log_ei_m = np.log(member_EI)
     # per member, on the measured data: the noise level's grid posterior and the local width of log EI
     lls, grids = p2.last_layers, p2.grids
-    with torch_threads(1):
-        lap_sd = np.array(
-            [
-                ll.local_sd_log_theta(math.log(ll.theta_fit), math.log(g.mode), ei_prior.log_sd)
-                for ll, g in zip(lls, grids, strict=True)
-            ]
-        )
+    if lap_sd is None:
+        with torch_threads(1):
+            lap_sd = np.array([local_sd(ll, g, ei_prior) for ll, g in zip(lls, grids, strict=True)])
     between, lap_var, lap_dof, pooled = pool_log_ei(log_ei_m, lap_sd, ei_prior.log_sd)
     warn = []
     if not np.isfinite(lap_sd).all():
@@ -483,7 +521,7 @@ def ensemble_posterior(
     diag = {
         "fit_runtime_s": p1.runtime_s + p2.runtime_s,
         "beta_factor": float(np.median(p2.beta_factor)),
-        "training": "batched (one network of M members)" if batched else "one task per member",
+        "training": training,
     }
     predictor = _MixturePredictor(
         [
@@ -502,7 +540,7 @@ def ensemble_posterior(
         sigma[None, :],
         diagnostics=diag,
         info=info,
-        runtime_s=time.perf_counter() - t0,
+        runtime_s=time.perf_counter() - t0 if runtime_s is None else runtime_s,
         predictor=predictor,
     )
 

@@ -63,6 +63,7 @@ differentiable for NUTS).
 from __future__ import annotations
 
 import copy
+import logging
 import math
 
 import numpy as np
@@ -75,6 +76,8 @@ from ..pinn.network import PINN
 from ..pinn.problem import Problem
 from ..pinn.taylor import Jet
 from .priors import EIPrior
+
+log = logging.getLogger(__name__)
 
 #: floor of the pseudo-observation sds (non-dimensional), so a perfect fit cannot make them singular
 MIN_PSEUDO_SD = 1e-6
@@ -109,6 +112,26 @@ def feature_jet(
     with torch.no_grad():
         j = net.basis_jet(xi.double().unsqueeze(0), tau.double().unsqueeze(0), kx, kt)
     return j.map(lambda c: c[0])
+
+
+def _cholesky(A: torch.Tensor) -> torch.Tensor:
+    """Cholesky factor of a precision that is positive definite in exact arithmetic (positive semi-definite
+    data and physics terms plus the weights' prior): where rounding in its largest terms loses definiteness,
+    the smallest diagonal jitter (1e-14 to 1e-6 of its largest diagonal entry) that restores it."""
+    L, info = torch.linalg.cholesky_ex(A)
+    if int(info) == 0:
+        return L
+    top = A.detach().diagonal().abs().max()
+    eye = torch.eye(A.shape[-1], dtype=A.dtype)
+    for k in range(-14, -5):
+        L, info = torch.linalg.cholesky_ex(A + (10.0**k * top) * eye)
+        if int(info) == 0:
+            log.debug("last layer: precision made definite with jitter 1e%d of its diagonal", k)
+            return L
+    raise torch.linalg.LinAlgError(
+        f"the last layer's precision is not positive definite (leading minor {int(info)}) even with "
+        "a jitter of 1e-6 of its largest diagonal entry"
+    )
 
 
 class LastLayer:
@@ -345,7 +368,7 @@ class LastLayer:
     def log_marginal(self, log_theta: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
         """log p(y, pseudo-observations | theta, sigma) up to a constant (differentiable scalar)."""
         A, b, inv_s2 = self._system(log_theta, log_sigma)
-        Lc = torch.linalg.cholesky(A)
+        Lc = _cholesky(A)
         z = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
         logdet = 2 * torch.log(torch.diagonal(Lc)).sum()
         return (
@@ -361,7 +384,7 @@ class LastLayer:
                 torch.tensor(log_theta, dtype=torch.float64),
                 torch.tensor(log_sigma, dtype=torch.float64),
             )
-            Lc = torch.linalg.cholesky(A)
+            Lc = _cholesky(A)
             mean = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
             cov = torch.cholesky_inverse(Lc)
         it = math.exp(-log_theta)
