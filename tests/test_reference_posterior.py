@@ -12,7 +12,7 @@ from bayespinn.data.synthetic import simulate
 from bayespinn.options import RunOptions
 from bayespinn.physics.modal import ModalModel
 from bayespinn.uq.coverage import binomial_acceptance, coverage_study, paired_with_reference
-from bayespinn.uq.modal_mcmc import modal_posterior
+from bayespinn.uq.modal_mcmc import INTERP_NATS, ModalLikelihood, modal_posterior
 from bayespinn.uq.posterior import Posterior
 from bayespinn.uq.priors import NoisePrior
 from bayespinn.uq.sampler import MCMCSettings, sample
@@ -96,11 +96,16 @@ def _grid_posterior(cfg, data):
     return mean, float(np.sqrt(np.sum(w * (EI - mean) ** 2)))
 
 
-@pytest.mark.parametrize("snr", [10.0, 30.0])
-def test_modal_posterior_matches_quadrature(snr, exeter):
-    data = simulate(exeter, snr, 5)
-    p = modal_posterior(data, exeter, noise_prior=NoisePrior.build("vague", data.value), seed=5)
-    mean, sd = _grid_posterior(exeter, data)
+@pytest.mark.parametrize("case,snr", [("deflection", 10.0), ("deflection", 30.0), ("strain", 20.0)])
+def test_modal_posterior_matches_quadrature(case, snr, request):
+    """Against exact quadrature of the exact modal likelihood (40 modes, no interpolant): the strain case is
+    sampled through the Chebyshev interpolant of the likelihood (`ModalLikelihood.interpolate`)."""
+    cfg = request.getfixturevalue("exeter" if case == "deflection" else "exeter_strain")
+    data = simulate(cfg, snr, 5)
+    p = modal_posterior(data, cfg, noise_prior=NoisePrior.build("vague", data.value), seed=5)
+    if case == "strain":
+        assert p.diagnostics["interpolation"]["used"]
+    mean, sd = _grid_posterior(cfg, data)
     assert abs(p.EI.mean() - mean) < ISSUE_MEAN_TOL_SD * sd
     assert abs(p.EI.std() / sd - 1) < ISSUE_SD_TOL_REL
     assert (
@@ -239,3 +244,35 @@ def test_modal_coverage_200_replicates():
     lo, hi = binomial_acceptance(200, 0.9, false_failure=0.01)
     assert lo <= res["hits"] <= hi, res["hits"]
     assert res["rank_uniformity_p"] > 0.001
+
+
+def _strain_likelihood(cfg):
+    data = simulate(cfg, 20.0, 2)
+    return cfg, data, ModalLikelihood(cfg, data, n_modes=6)
+
+
+def test_interpolated_likelihood_is_within_its_stated_nats_and_exact_outside_its_window(exeter_strain):
+    cfg, data, lik = _strain_likelihood(exeter_strain)
+    c, hw = math.log(cfg.beam.EI), 0.01
+    info = lik.interpolate(c, hw)
+    assert info["used"] and info["max_loglik_error_nats"] <= INTERP_NATS
+    le = c + hw * np.random.default_rng(0).uniform(-1, 1, 64)
+    exact = ModalLikelihood(cfg, data, n_modes=6)
+    n = data.value.size
+    err = 0.5 * n * np.abs(np.log(lik.rss_log(le) / exact.rss_log(le)))
+    assert err.max() <= 2 * INTERP_NATS  # random points, not only the midpoints it was checked at
+    assert err.max() > 0  # the interpolant is in use
+    out = c + np.array([-1.5, 1.5]) * hw
+    np.testing.assert_array_equal(lik.rss_log(out), exact.rss_log(out))
+
+
+def test_an_interpolant_that_cannot_reach_the_tolerance_is_not_used(exeter_strain, monkeypatch):
+    """Negative control: with at most 16 nodes over a window of +-30 % in EI the check must refuse."""
+    import bayespinn.uq.modal_mcmc as mm
+
+    monkeypatch.setattr(mm, "INTERP_MAX_NODES", 16)
+    cfg, data, lik = _strain_likelihood(exeter_strain)
+    info = lik.interpolate(math.log(cfg.beam.EI), 0.3)
+    assert not info["used"] and lik.cheb is None
+    le = math.log(cfg.beam.EI) + np.array([-0.1, 0.0, 0.1])
+    np.testing.assert_array_equal(lik.rss_log(le), ModalLikelihood(cfg, data, 6).rss_log(le))
