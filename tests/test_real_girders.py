@@ -167,13 +167,14 @@ def test_damaged_girder_run_finds_the_segment_and_reports_it(tmp_path):
     [
         ("", "ensemble", "model.EI_segments"),
         ("", "bpinn", "model.EI_segments"),
-        ('[model]\nnoise = "ar1"\n', "modal", "model.noise"),
+        ('[model]\nnoise = "ar1"\n', "ensemble", "model.noise"),
+        ('[model]\nnoise = "ar1"\n', "bpinn", "model.noise"),
     ],
 )
 def test_methods_refuse_what_they_cannot_describe_before_anything_runs(
     tmp_path, extra, method, field
 ):
-    """A PINN method asked for EI per segment, or any method for the AR(1) likelihood (not built): exit 2,
+    """A PINN method asked for EI per segment, or for the AR(1) likelihood (only the reference has it): exit 2,
     one line naming the field, nothing written, before the reference (which would take minutes) runs."""
     cfg = tmp_path / "c.toml"
     text = (REPO / "examples" / "damaged-girder.toml").read_text()

@@ -251,7 +251,9 @@ def _strain_likelihood(cfg):
     return cfg, data, ModalLikelihood(cfg, data, n_modes=6)
 
 
-def test_interpolated_likelihood_is_within_its_stated_nats_and_exact_outside_its_window(exeter_strain):
+def test_interpolated_likelihood_is_within_its_stated_nats_and_exact_outside_its_window(
+    exeter_strain,
+):
     cfg, data, lik = _strain_likelihood(exeter_strain)
     c, hw = math.log(cfg.beam.EI), 0.01
     info = lik.interpolate(c, hw)

@@ -20,6 +20,10 @@ does not depend on which sigma was drawn), and the verdict combines them by Bonf
 m x min p < `FALSE_ALARM`. Because a fitted prediction has spent some directions of the noise, the observed
 statistics of a well-specified model are, if anything, smaller than those of white noise: the false-alarm
 rate is at most `FALSE_ALARM` (0.01) by construction; `studies/fitcheck.py` measures it.
+
+With an AR(1) noise model (`[model] noise = "ar1"`) the residuals are first whitened with the posterior median
+coefficient (`uq.ar1.AR1Noise.whiten`): under that model the innovations, not the residuals, are white, and
+both statistics are applied to them.
 """
 
 from __future__ import annotations
@@ -132,6 +136,12 @@ def mean_prediction(
     return mu
 
 
+def _noise_ar1(post) -> float | None:
+    """The posterior median of the AR(1) noise coefficient, or None for a white-noise model."""
+    r = getattr(post, "noise_ar1", None)
+    return None if r is None else float(np.median(r))
+
+
 def check(
     post, data: Measurements, length: float, duration: float, *, seed: int = 0
 ) -> dict | None:
@@ -141,6 +151,11 @@ def check(
     if mu is None or not np.all(np.isfinite(mu)):
         return None
     e = np.asarray(data.value, float) - mu
+    rho_noise = _noise_ar1(post)
+    if rho_noise is not None:  # AR(1) noise model: its innovations are what must be white
+        from .ar1 import AR1Noise
+
+        e = AR1Noise.of(data).whiten(e, rho_noise)
     n = e.size
     Q = smooth_basis(data, length, duration)
     series = _series(data)
@@ -181,5 +196,6 @@ def check(
         "p_values": p,
         **stats,
         "standardised_residual_rms": float(np.sqrt(np.mean(std**2))),
+        **({"noise_ar1": rho_noise, "whitened": True} if rho_noise is not None else {}),
         "false_alarm": FALSE_ALARM,
     }

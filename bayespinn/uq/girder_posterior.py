@@ -67,6 +67,7 @@ from ..errors import InputError
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
 from ..threads import one_blas_thread
+from .ar1 import Z_MAX, AR1Noise, lag1
 from .modal_mcmc import TRUNCATION_FRACTION
 from .posterior import jsonable, mcmc_diagnostics, summarise
 from .priors import EIPrior, NoisePrior
@@ -74,6 +75,7 @@ from .sampler import ESS_MIN, RHAT_MAX
 
 SUPPORTS = ("pinned", "springs")
 LOAD_FACTOR_MODES = ("auto", "off")
+NOISE_MODELS = ("iid", "ar1")
 #: a segment is damaged when its EI is below this fraction of EI_nominal
 DAMAGE_FRACTION = 0.9
 #: every parameter is confined to this many prior sd around its prior centre
@@ -138,10 +140,11 @@ class ParameterLayout:
     n_segments: int
     infer_springs: bool
     infer_load: bool
+    infer_ar1: bool = False
 
     @property
     def dim(self) -> int:
-        return self.n_segments + 2 * self.infer_springs + self.infer_load
+        return self.n_segments + 2 * self.infer_springs + self.infer_load + self.infer_ar1
 
     @property
     def springs(self) -> slice:
@@ -149,7 +152,12 @@ class ParameterLayout:
 
     @property
     def load(self) -> int | None:
-        return self.dim - 1 if self.infer_load else None
+        return self.n_segments + 2 * self.infer_springs if self.infer_load else None
+
+    @property
+    def ar1(self) -> int | None:
+        """Where z = atanh(rho) of AR(1) noise sits (last), or None (white noise)."""
+        return self.dim - 1 if self.infer_ar1 else None
 
     def names(self) -> list[str]:
         out = [f"EI_segments[{s}]" for s in range(self.n_segments)]
@@ -157,13 +165,16 @@ class ParameterLayout:
             out += ["rotational_stiffness[0]", "rotational_stiffness[1]"]
         if self.infer_load:
             out.append("load_factor")
+        if self.infer_ar1:
+            out.append("noise_ar1")
         return out
 
 
 class GirderLogPosterior:
-    """log p(theta | y) up to a constant, sigma integrated out: log prior - (n/2) log RSS.
+    """log p(theta | y) up to a constant, sigma integrated out: log prior - (n/2) log RSS (white noise), or
+    log prior - (n/2) log Q - ((n - m)/2) log(1 - rho^2) with AR(1) noise (`uq.ar1`).
 
-    Call with theta shaped (W, dim); -inf outside the support (10 prior sd).
+    Call with theta shaped (W, dim); -inf outside the support (10 prior sd; |rho| <= ar1.RHO_MAX).
     """
 
     def __init__(
@@ -174,8 +185,11 @@ class GirderLogPosterior:
         ei_prior: EIPrior,
         k_prior: tuple[float, float] | None,
         load_rel_sd: float | None,
+        noise: AR1Noise | None = None,
     ):
-        self.model, self.layout = model, layout
+        if layout.infer_ar1 != (noise is not None):
+            raise ValueError("AR(1) noise needs its series, and only then")
+        self.model, self.layout, self.noise = model, layout, noise
         self.y = np.asarray(y, float)
         self.n = self.y.size
         S = layout.n_segments
@@ -191,13 +205,18 @@ class GirderLogPosterior:
                 raise InputError("vehicle.load_rel_sd", load_rel_sd, "> 0 to infer the load factor")
             loc.append(0.0)  # log load factor; its sd to first order
             sd.append(load_rel_sd)
+        if layout.infer_ar1:
+            loc.append(0.0)  # z = atanh(rho); its prior (uniform rho) has sd about 1 in z
+            sd.append(1.0)
         self.load_rel_sd = load_rel_sd
         self.loc, self.sd = np.array(loc), np.array(sd)
         self.lo = self.loc - SUPPORT_SD * self.sd
         self.hi = self.loc + SUPPORT_SD * self.sd
         if layout.infer_load:
-            self.lo[-1] = math.log(max(1.0 - SUPPORT_SD * load_rel_sd, 1e-3))
-            self.hi[-1] = math.log(1.0 + SUPPORT_SD * load_rel_sd)
+            self.lo[layout.load] = math.log(max(1.0 - SUPPORT_SD * load_rel_sd, 1e-3))
+            self.hi[layout.load] = math.log(1.0 + SUPPORT_SD * load_rel_sd)
+        if layout.infer_ar1:
+            self.lo[layout.ar1], self.hi[layout.ar1] = -Z_MAX, Z_MAX
 
     def unpack(self, theta: np.ndarray):
         """(EI (W, S), springs (W, 2) or None, load factor (W,) or None) of theta (W, dim)."""
@@ -210,13 +229,17 @@ class GirderLogPosterior:
 
     def log_prior(self, theta: np.ndarray) -> np.ndarray:
         """Log prior density with respect to theta, up to a constant."""
+        lay = self.layout
         theta = np.atleast_2d(theta)
         z = (theta - self.loc) / self.sd
-        if not self.layout.infer_load:
-            return -0.5 * np.sum(z**2, axis=1)
-        ll = theta[:, -1]  # log load factor: N(1, sd) in the factor, times its Jacobian
-        out = -0.5 * np.sum(z[:, :-1] ** 2, axis=1)
-        return out - 0.5 * ((np.exp(ll) - 1.0) / self.load_rel_sd) ** 2 + ll
+        g = lay.n_segments + 2 * lay.infer_springs  # the Gaussian coordinates
+        out = -0.5 * np.sum(z[:, :g] ** 2, axis=1)
+        if lay.infer_load:
+            ll = theta[:, lay.load]  # log load factor: N(1, sd) in the factor, times its Jacobian
+            out = out - 0.5 * ((np.exp(ll) - 1.0) / self.load_rel_sd) ** 2 + ll
+        if lay.infer_ar1:
+            out = out + AR1Noise.log_prior(theta[:, lay.ar1])
+        return out
 
     def predict(self, theta: np.ndarray) -> np.ndarray:
         """Surrogate predictions (W, P), in batches of BATCH."""
@@ -231,6 +254,25 @@ class GirderLogPosterior:
         r = self.y[None, :] - self.predict(theta)
         return np.einsum("wp,wp->w", r, r)
 
+    def log_noise(self, theta: np.ndarray) -> np.ndarray:
+        """The sigma-marginalised log likelihood: -(n/2) log RSS, or with AR(1) noise
+        -(n/2) log Q(rho) - ((n - m)/2) log(1 - rho^2)."""
+        theta = np.atleast_2d(theta)
+        if self.noise is None:
+            return -0.5 * self.n * np.log(self.rss(theta))
+        z = theta[:, self.layout.ar1]
+        q = self.noise.quad(self.y[None, :] - self.predict(theta), z)
+        return -0.5 * self.n * np.log(q) + self.noise.log_jacobian(z)
+
+    def log_quad(self, theta: np.ndarray, lp: np.ndarray) -> np.ndarray:
+        """log of the sum of squares sigma's inverse-gamma law uses (RSS, or Q(rho) with AR(1) noise),
+        recovered from stored log densities lp = log prior + log_noise."""
+        theta = np.atleast_2d(theta)
+        rest = self.log_prior(theta) - lp
+        if self.noise is not None:
+            rest = rest + self.noise.log_jacobian(theta[:, self.layout.ar1])
+        return rest * (2.0 / self.n)
+
     def inside(self, theta: np.ndarray) -> np.ndarray:
         theta = np.atleast_2d(theta)
         return np.all((theta > self.lo) & (theta < self.hi), axis=1) & np.all(
@@ -242,7 +284,7 @@ class GirderLogPosterior:
         out = np.full(theta.shape[0], -np.inf)
         ok = self.inside(theta)
         if ok.any():
-            out[ok] = self.log_prior(theta[ok]) - 0.5 * self.n * np.log(self.rss(theta[ok]))
+            out[ok] = self.log_prior(theta[ok]) + self.log_noise(theta[ok])
         return out
 
 
@@ -273,6 +315,9 @@ def find_map(post: GirderLogPosterior, starts: Sequence[np.ndarray] | None = Non
     pts = np.repeat(base[None], grid.size, axis=0)
     pts[:, :S] = grid[:, None]
     base[:S] = grid[int(np.argmax(post(pts)))]
+    if lay.infer_ar1:  # start rho at the residuals' lag-1 autocorrelation there
+        r = post.y - post.predict(base)[0]
+        base[lay.ar1] = math.atanh(min(max(lag1(post.noise.series, r), -0.95), 0.95))
     cands = [base]
     if lay.infer_springs:
         for dz in (-2.0, 2.0):
@@ -519,7 +564,7 @@ class GirderPosterior:
     EI_segments : array (chain, draw, S), segment EI [N m^2], left to right
     rotational_stiffness : array (chain, draw, 2) [N m/rad] (left, right), or None (pinned analysis)
     load_factor : array (chain, draw), or None (not inferred)
-    sigma : array (chain, draw), noise sd (units of the data)
+    sigma : array (chain, draw), noise sd (units of the data; the marginal sd with AR(1) noise)
     edges : array (S + 1,), segment boundaries [m]
     EI_nominal : design EI [N m^2] that damage is judged against
     diagnostics : worst-case rhat / ess_bulk / ess_tail, `per_parameter`, converged, tau, steps, ...
@@ -537,6 +582,8 @@ class GirderPosterior:
     info: dict = field(default_factory=dict)
     runtime_s: float = 0.0
     method: str = "modal_mcmc"
+    #: (chain, draw) AR(1) coefficient of the noise between consecutive samples, or None (white noise)
+    noise_ar1: np.ndarray | None = None
 
     @property
     def n_segments(self) -> int:
@@ -563,6 +610,8 @@ class GirderPosterior:
             out["load_factor"] = self.load_factor
         out["EI"] = self.EI
         out["sigma"] = self.sigma
+        if self.noise_ar1 is not None:
+            out["noise_ar1"] = self.noise_ar1
         return out
 
     def interval(self, name: str = "EI", level: float = 0.9) -> tuple[float, float]:
@@ -596,6 +645,8 @@ class GirderPosterior:
         if self.load_factor is not None:
             out["load_factor"] = summarise(self.load_factor, t.get("load_factor"))
         out["sigma"] = summarise(self.sigma)
+        if self.noise_ar1 is not None:
+            out["noise_ar1"] = summarise(self.noise_ar1)
         out["EI_nominal"] = float(self.EI_nominal)
         out["diagnostics"] = jsonable(self.diagnostics)
         out.update(jsonable(self.info))
@@ -673,6 +724,7 @@ def girder_posterior(
     k_median: float = 1.0e8,
     k_log_sd: float = 2.0,
     EI_nominal: float | None = None,
+    noise: str = "iid",
     seed: int | np.random.SeedSequence = 0,
     settings: GirderMCMCSettings | None = None,
     n_elements: int = 96,
@@ -692,6 +744,7 @@ def girder_posterior(
     load_rel_sd : relative sd of the axle loads around the stated ones ([vehicle] load_rel_sd).
     k_median, k_log_sd : log-normal spring prior [N m/rad] ([prior] k_median, k_log_sd).
     EI_nominal : design EI that damage is judged against (default: the prior median).
+    noise : "iid" (white) or "ar1" (AR(1) along each sensor's series, its coefficient inferred: `uq.ar1`).
     seed : root seed (walker starts and moves: "emcee" stream; sigma draws: "noise").
     settings : run-length rules.
     n_elements : FE elements of the surrogate.
@@ -717,6 +770,8 @@ def girder_posterior(
         raise InputError("model.supports", supports, "'pinned' or 'springs'")
     if load_factor not in LOAD_FACTOR_MODES:
         raise InputError("model.load_factor", load_factor, "'auto' or 'off'")
+    if noise not in NOISE_MODELS:
+        raise InputError("model.noise", noise, "'iid' or 'ar1'")
     load_rel_sd = check_load_rel_sd(load_rel_sd)
     k_median = _check_number("prior.k_median", k_median, positive=True)
     k_log_sd = _check_number("prior.k_log_sd", k_log_sd, positive=True)
@@ -727,7 +782,8 @@ def girder_posterior(
     settings = settings or GirderMCMCSettings()
     infer_springs = supports == "springs"
     infer_load = load_factor == "auto" and load_rel_sd > 0
-    lay = ParameterLayout(S, infer_springs, infer_load)
+    lay = ParameterLayout(S, infer_springs, infer_load, noise == "ar1")
+    ar1 = AR1Noise.of(data) if noise == "ar1" else None
     k_prior = (k_median, k_log_sd) if infer_springs else None
     lf_sd = load_rel_sd if infer_load else None
     y = np.asarray(data.value, float)
@@ -748,7 +804,7 @@ def girder_posterior(
 
     def build(tmpl: Girder, n_modes: int) -> GirderLogPosterior:
         m = _model(tmpl, vehicle, data, n_modes, infer_springs, n_elements)
-        return GirderLogPosterior(m, y, lay, ei_prior, k_prior, lf_sd)
+        return GirderLogPosterior(m, y, lay, ei_prior, k_prior, lf_sd, ar1)
 
     # MAP on a surrogate referenced at the prior centre, then re-referenced at the MAP
     tmpl = template([ei_prior.median] * S, [k_median, k_median])
@@ -770,9 +826,9 @@ def girder_posterior(
     EI_seg = np.exp(th[..., :S])
     ks = np.exp(th[..., lay.springs]) if infer_springs else None
     lf = np.exp(th[..., lay.load]) if infer_load else None
-    # RSS from the stored log density: lp = log prior - (n/2) log RSS
+    # RSS (or Q(rho)) from the stored log density
     flat = th.reshape(-1, lay.dim)
-    log_rss = (post.log_prior(flat) - ch.lp.ravel()) * (2.0 / post.n)
+    log_rss = post.log_quad(flat, ch.lp.ravel())
     g = np.random.default_rng(seeding.stream(seed, "noise")).gamma(
         post.n / 2.0, 1.0, size=flat.shape[0]
     )
@@ -787,6 +843,7 @@ def girder_posterior(
         sigma=sig,
         edges=np.linspace(0.0, L, S + 1),
         EI_nominal=nominal,
+        noise_ar1=np.tanh(th[..., lay.ar1]) if lay.infer_ar1 else None,
     )
     per = {name: mcmc_diagnostics(d) for name, d in result.draws().items()}
     rhat = max(v["rhat"] for v in per.values())
@@ -824,7 +881,8 @@ def girder_posterior(
         "n_modes": n_modes,
         "truncation_error": trunc,
         "noise_prior": noise_prior.describe(),
-        "scheme": "emcee on theta with sigma marginalised; exact inverse-gamma sigma draws",
+        "scheme": "emcee on theta with sigma marginalised; exact inverse-gamma sigma draws"
+        + ("; AR(1) noise, rho as atanh(rho)" if lay.infer_ar1 else ""),
     }
     EI_map, ks_map, lf_map = post.unpack(theta)
     map_info: dict[str, Any] = {"EI_segments": EI_map[0].tolist(), "sigma": sigma_map}
@@ -832,6 +890,8 @@ def girder_posterior(
         map_info["rotational_stiffness"] = ks_map[0].tolist()
     if infer_load:
         map_info["load_factor"] = float(lf_map[0])
+    if lay.infer_ar1:
+        map_info["noise_ar1"] = float(np.tanh(theta[lay.ar1]))
     result.info = {
         "map": map_info,
         "laplace_sd": dict(
@@ -841,6 +901,7 @@ def girder_posterior(
             "EI_segments": S,
             "supports": supports,
             "load_factor": "inferred" if infer_load else "fixed at 1",
+            "noise": noise,
         },
         "prior": {
             "EI_median": ei_prior.median,

@@ -1,9 +1,10 @@
 """The modal reference for real girders, as the pipeline's `Posterior`: `girder_posterior` run from a
 configuration, its summary in the contract's keys, and a predictor for the fit check and the report.
 
-`ModalMCMC` uses it whenever the analysis model is not the uniform, pinned, known-load girder
-(`Config.ideal`): EI per segment (`[model] EI_segments`), springs at the supports (`supports = "springs"`)
-or an uncertain axle-load factor (`vehicle.load_rel_sd` > 0 with `load_factor = "auto"`). `EI` in the
+`ModalMCMC` uses it whenever the analysis model is not the uniform, pinned, known-load girder with white
+noise (`Config.ideal`): EI per segment (`[model] EI_segments`), springs at the supports (`supports =
+"springs"`), an uncertain axle-load factor (`vehicle.load_rel_sd` > 0 with `load_factor = "auto"`) or AR(1)
+noise (`[model] noise = "ar1"`). `EI` in the
 summary is then the span-averaged flexibility's equivalent L / integral dx / EI, per draw.
 """
 
@@ -32,6 +33,11 @@ class GirderReference(Posterior):
     summary's EI_segments, rotational_stiffness and load_factor."""
 
     girder: GirderPosterior | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def noise_ar1(self) -> np.ndarray | None:
+        """Draws of the AR(1) coefficient of the noise, or None (white-noise model)."""
+        return None if self.girder is None else self.girder.noise_ar1
 
     def summary(self, truth: dict | None = None) -> dict:
         if self.girder is None:
@@ -115,6 +121,7 @@ def girder_reference(
         k_median=cfg.prior.k_median,
         k_log_sd=cfg.prior.k_log_sd,
         EI_nominal=m.EI_nominal,
+        noise=m.noise,
         seed=seed,
         settings=settings,
     )
