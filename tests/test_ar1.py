@@ -91,3 +91,26 @@ def test_the_ar1_model_on_white_noise_finds_a_coefficient_near_zero():
     lo, hi = m["noise_ar1"]["ci90"]
     assert lo <= 0.0 <= hi and hi - lo < 0.2, m["noise_ar1"]
     assert m["fit_check"]["verdict"] == "fits"
+
+
+def test_run_with_the_ar1_model_reports_the_coefficient(tmp_path):
+    """`bayespinn run` with [model] noise = "ar1": summary.json has noise_ar1 (schema-valid: the run
+    validates it), the report has its table."""
+    import json
+    import subprocess
+    import sys
+
+    cfg = tmp_path / "ar1.toml"
+    cfg.write_text('[data]\nsample_rate = 100.0\nnoise_ar1 = 0.6\n[model]\nnoise = "ar1"\n')
+    out = tmp_path / "out"
+    r = subprocess.run(
+        [sys.executable, "-m", "bayespinn", "run", "--snr", "20", "--case", "strain", "--method",
+         "modal", "--config", str(cfg), "--out", str(out), "--quiet"],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr[-3000:]
+    m = json.loads((out / "summary.json").read_text())["methods"]["modal_mcmc"]
+    assert set(m["noise_ar1"]) >= {"mean", "sd", "ci90"}
+    assert m["model"]["noise"] == "ar1"
+    md = (out / "report.md").read_text()
+    assert "Noise correlation" in md and "AR(1) coefficient" in md

@@ -304,6 +304,27 @@ def girder_section(result) -> list[Block]:
                         "frequency pins EI whatever the load, and the share is small."
                     )
                 )
+        rho = m.get("noise_ar1")
+        if rho:
+            cfg = result.config
+            sim = cfg.data.noise_ar1 if (cfg is not None and result.truth is not None) else None
+            out += [
+                Heading(f"Noise correlation: {name(key)}", 3),
+                table(
+                    ("", "mean", "90 % interval", "simulated"),
+                    [
+                        (
+                            "AR(1) coefficient",
+                            fmt(rho["mean"], ".3f"),
+                            fmt_interval(rho["ci90"], 1.0, ".3f"),
+                            fmt(sim, ".3f"),
+                        )
+                    ],
+                    "The correlation of the noise between consecutive samples of one sensor "
+                    '([model] noise = "ar1"); EI\'s interval accounts for it, and the fit check tests '
+                    "the whitened residuals.",
+                ),
+            ]
     return out
 
 
