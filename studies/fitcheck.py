@@ -19,6 +19,7 @@ gather every study there.
     python studies/fitcheck.py --config examples/bearings-as-pinned.toml --snr 30 --replicates 100 --expect misfit
     python studies/fitcheck.py --config examples/damaged-as-uniform.toml --case strain --snr 30 --replicates 100 --expect misfit
     python studies/fitcheck.py --config examples/ar1-strain.toml --case strain --snr 20 --replicates 100 --expect misfit
+    python studies/fitcheck.py --config examples/ar1-strain-ar1.toml --case strain --snr 20 --replicates 100 --expect fits
 """
 
 from __future__ import annotations
