@@ -134,6 +134,7 @@ def summarise(doc: dict) -> dict:
         "coverage": coverage,
         "converged": int(sum(bool(r.get("converged")) for r in recs)),
         "median_time_s": float(np.median([r["time_s"] for r in recs])) if recs else None,
+        "noise_model": ((doc.get("config_values") or {}).get("model") or {}).get("noise", "iid"),
     }
 
 
@@ -261,7 +262,8 @@ def blocks(page: dict) -> list:
                 f"({'today' + chr(39) + 's code' if d['fresh'] else '**stale**: computed by code that has changed since'}), "
                 f"{s['converged']} converged, {s['unchecked']} without a verdict; {_pct(s['share'])} "
                 f"`{d['expect']}` {verdict} the required {_pct(s['required_share'])}; median lag-1 "
-                f"autocorrelation of the residuals {s['median_residual_autocorr']:+.3f}; median time "
+                f"autocorrelation of the residuals{_whitened(d)} {s['median_residual_autocorr']:+.3f}; "
+                "median time "
                 f"{s['median_time_s']:.1f} s per replicate. Command: `{d['provenance']['command']}`."
             ),
             table(
@@ -276,6 +278,11 @@ def blocks(page: dict) -> list:
             ),
         ]
     return out
+
+
+def _whitened(d: dict) -> str:
+    """' (whitened)' when the study's analysis model has AR(1) noise: the check tests its innovations."""
+    return " (whitened by the AR(1) model)" if d["summary"].get("noise_model") == "ar1" else ""
 
 
 def write_page(out: Path) -> dict:
