@@ -220,13 +220,6 @@ def analyse(
     if truth is not None and "sigma" not in truth and snr_db is not None and synthetic:
         truth = {**truth, "sigma": sigma_for_snr(vt, snr_db)}  # the noise level simulate used
     for m in chosen:  # every method's refusal before any of them runs
-        if cfg.model.noise != "iid" and not m.reference:
-            raise InputError(
-                "model.noise",
-                cfg.model.noise,
-                f"'iid' for {m.display}: the AR(1) likelihood is built in the modal reference only "
-                "(issue 24); run it with --method modal",
-            )
         m.check(data, cfg)
     for w in unit_warnings(data):
         log.warning("warning: %s", w)

@@ -34,3 +34,19 @@ def _one_torch_thread():
 
     torch.set_num_threads(1)
     yield
+
+
+@pytest.fixture(scope="session")
+def smoke_fit():
+    """A smoke-profile PINN fit of the Exeter deflection case at 20 dB: (config, data, problem, fit)."""
+    from bayespinn.config import preset
+    from bayespinn.data.synthetic import simulate
+    from bayespinn.pinn import Problem, TrainSettings, fit
+
+    cfg = preset()
+    data = simulate(cfg, 20.0, 1)
+    problem = Problem.from_config(cfg, data)
+    # Adam (not varpro): varpro fits the supports so well that the dense observation-space checks of the
+    # last-layer marginal become too ill-conditioned to be a reference
+    res = fit(problem, TrainSettings.for_profile("smoke", optimizer="adam"), seed=0, quiet=True)
+    return cfg, data, problem, res

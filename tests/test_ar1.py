@@ -114,3 +114,120 @@ def test_run_with_the_ar1_model_reports_the_coefficient(tmp_path):
     assert m["model"]["noise"] == "ar1"
     md = (out / "report.md").read_text()
     assert "Noise correlation" in md and "AR(1) coefficient" in md
+
+
+def _dense_last_layer(ll, D, P4, P2, Bm, Cm, lt, ls, rho):
+    """log N of every observation of a last-layer model with its output weights integrated out, in observation
+    space, the data noise AR(1) along the model's series (covariance sigma^2 rho^|i-j| within a series)."""
+    import torch
+
+    th, s = math.exp(lt), math.exp(ls)
+    Z = torch.cat([D / th, P4 + P2 / th, Bm, Cm]).numpy()
+    t = np.concatenate([ll.y.numpy(), ll.f.numpy(), np.zeros(Bm.shape[0] + Cm.shape[0])])
+    n = D.shape[0]
+    R = np.zeros((n, n))
+    for rows in ll.ar1.series:
+        i = np.arange(rows.size)
+        R[np.ix_(rows, rows)] = rho ** np.abs(i[:, None] - i[None, :])
+    S = ll.s_w**2 * Z @ Z.T
+    S[:n, :n] += s * s * R
+    k = P4.shape[0]
+    S[n : n + k, n : n + k] += ll.s_f**2 * np.eye(k)
+    j = Bm.shape[0]
+    S[n + k : n + k + j, n + k : n + k + j] += ll.s_b**2 * np.eye(j)
+    S[n + k + j :, n + k + j :] += ll.s_i**2 * np.eye(Cm.shape[0])
+    St, tt = torch.as_tensor(S), torch.as_tensor(t)
+    return float(torch.distributions.MultivariateNormal(torch.zeros_like(tt), St).log_prob(tt))
+
+
+@pytest.mark.parametrize("vary", [False, True])
+def test_the_last_layer_marginal_with_ar1_noise_is_the_dense_gaussian(smoke_fit, vary):
+    """The PINN methods' likelihood (`LastLayer` with `noise`): at several (theta, sigma, rho) it equals the dense
+    Gaussian of all observations with AR(1) data covariance, up to one constant, with the first mode held
+    and with it following theta; rho = 0 is the white-noise model exactly, and the white-noise model is
+    not the AR(1) one (negative control)."""
+    import torch
+
+    from bayespinn.uq.lastlayer import LastLayer, feature_jet
+
+    cfg, data, problem, res = smoke_fit
+    model = res.model()
+    kw = dict(n_pde=40, n_bc=10, n_ic=10, vary_first_mode=vary)
+    noise = AR1Noise.of(data)
+    ll = LastLayer(model, 0, problem, data, np.random.default_rng(0), noise=noise, **kw)
+    white = LastLayer(model, 0, problem, data, np.random.default_rng(0), **kw)
+    assert ll.first_mode_varies == vary and ll.pde_v is None
+    D0, P40, P20, B0, C0 = ll.rows(lambda xi, tau, kx, kt: feature_jet(model, 0, xi, tau, kx, kt))
+    T = lambda v: torch.tensor(v, dtype=torch.float64)  # noqa: E731
+
+    def dense(lt, ls, rho):
+        D, P4, P2, Bm, Cm = D0.clone(), P40.clone(), P20.clone(), B0, C0.clone()
+        if vary:  # the first mode's columns at theta: no PDE rows (exact), zero at the supports
+            Dv, Cv = ll._varying(T(lt))
+            D[:, ll.kf :], Cm[:, ll.kf :] = Dv, Cv
+            P4[:, ll.kf :], P2[:, ll.kf :] = 0.0, 0.0
+        return _dense_last_layer(ll, D, P4, P2, Bm, Cm, lt, ls, rho)
+
+    pts = [(0.0, -7.0, 0.0), (0.1, -7.5, 0.5), (-0.2, -6.5, -0.3), (0.05, -7.2, 0.9)]
+    ours = np.array([float(ll.log_marginal(T(a), T(b), T(math.atanh(r)))) for a, b, r in pts])
+    got = np.array([dense(*p) for p in pts])
+    assert np.ptp(ours - got) < 1e-6 * abs(got[0])
+    # rho = 0 is the white-noise model (the default z of an AR(1) model is 0 too)
+    for a, b, _ in pts:
+        w = float(white.log_marginal(T(a), T(b)))
+        assert float(ll.log_marginal(T(a), T(b))) == pytest.approx(w, rel=1e-12)
+    # negative control: the white model's likelihood differs from the AR(1) one's by far more than the tolerance
+    whites = np.array([float(white.log_marginal(T(a), T(b))) for a, b, _ in pts])
+    assert np.ptp(whites - got) > 1e3 * 1e-6 * abs(got[0])
+
+
+def test_the_pinn_training_objective_whitens_the_data_rows(smoke_fit):
+    """With `Problem.noise_ar1` the training's data term is the whitened residuals' sum of squares (the AR(1)
+    quadratic form Q(rho) of the scaled residuals), so randomise-then-optimise members are fitted under the
+    same likelihood the last layer uses; noise_ar1 = 0 is the white objective, which is not the AR(1) one."""
+    import dataclasses
+
+    import torch
+
+    from bayespinn.pinn.losses import data_residual
+
+    cfg, data, problem, res = smoke_fit
+    model = res.model().double()
+    pt = problem.tensors(1, dtype=torch.float64)
+    r = data_residual(model, pt)[0].detach().numpy()
+    noise = AR1Noise.of(data)
+    for rho in (0.6, -0.3):
+        pw = dataclasses.replace(problem, noise_ar1=rho).tensors(1, dtype=torch.float64)
+        rw = data_residual(model, pw)[0].detach().numpy()
+        q = noise.quad(r[None], np.array([math.atanh(rho)]))[0]
+        assert np.sum(rw * rw) == pytest.approx(q, rel=1e-10)
+        assert abs(np.sum(rw * rw) - np.sum(r * r)) > 1e-3 * np.sum(r * r)  # negative control
+    p0 = dataclasses.replace(problem, noise_ar1=0.0).tensors(1, dtype=torch.float64)
+    assert np.array_equal(data_residual(model, p0)[0].detach().numpy(), r)
+    with pytest.raises(ValueError, match="noise_ar1"):
+        dataclasses.replace(problem, noise_ar1=1.0)
+
+
+def test_the_pinn_methods_infer_ar1_noise_beside_the_reference():
+    """Strain records with AR(1) noise (0.8, 200 Hz, 20 dB), smoke profile: the deep ensemble and the B-PINN
+    with `[model] noise = "ar1"` give EI and the coefficient within 1.5 reference sds of the reference's mean
+    on the same data, sds within [0.67, 1.5] of its, and the fit check's `fits` on the whitened residuals;
+    the B-PINN with white noise on the same data says `misfit` (the negative control)."""
+    over = {"data": {"noise_ar1": 0.8, "sample_rate": 200.0}}
+    cfg = bp.resolve("strain", {**over, "model": {"noise": "ar1"}})
+    data = bp.simulate(cfg, 20.0, 0)
+    got = bp.analyse(
+        data, cfg, methods=["modal", "ensemble", "bpinn"], seed=0, profile="smoke", snr_db=20.0
+    ).summary["methods"]
+    ref = got["modal_mcmc"]
+    for key in ("ensemble", "bpinn"):
+        m = got[key]
+        for var in ("EI", "noise_ar1"):
+            z = (m[var]["mean"] - ref[var]["mean"]) / ref[var]["sd"]
+            ratio = m[var]["sd"] / ref[var]["sd"]
+            assert abs(z) < 1.5 and 0.67 <= ratio <= 1.5, (key, var, z, ratio)
+        assert m["fit_check"]["verdict"] == "fits" and m["fit_check"]["whitened"], key
+    white = bp.resolve("strain", {**over, "model": {"noise": "iid"}})
+    w = bp.analyse(data, white, methods=["bpinn"], seed=0, profile="smoke", snr_db=20.0)
+    assert w.summary["methods"]["bpinn"]["fit_check"]["verdict"] == "misfit"
+    assert "noise_ar1" not in w.summary["methods"]["bpinn"]

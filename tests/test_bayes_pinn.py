@@ -11,7 +11,7 @@ from bayespinn import methods
 from bayespinn.config import preset
 from bayespinn.data.synthetic import simulate
 from bayespinn.options import RunOptions
-from bayespinn.pinn import Problem, TrainSettings, fit
+from bayespinn.pinn import TrainSettings, fit
 from bayespinn.uq.bpinn import nuts
 from bayespinn.uq.lastlayer import LastLayer
 from bayespinn.uq.nuts import NUTSSettings, nuts_health
@@ -20,17 +20,6 @@ from bayespinn.uq.nuts import NUTSSettings, nuts_health
 EXACT_TOL = 1e-6
 #: NUTS with 4 x 300 draws: Monte Carlo error of the mean ~0.05 sd, of the sd ~4 %
 NUTS_MEAN_TOL_SD, NUTS_SD_TOL = 0.2, 0.12
-
-
-@pytest.fixture(scope="module")
-def smoke_fit():
-    cfg = preset()
-    data = simulate(cfg, 20.0, 1)
-    problem = Problem.from_config(cfg, data)
-    # Adam (not varpro): varpro fits the supports so well that the dense observation-space check
-    # below becomes too ill-conditioned to be a reference
-    res = fit(problem, TrainSettings.for_profile("smoke", optimizer="adam"), seed=0, quiet=True)
-    return cfg, data, problem, res
 
 
 def _brute_force(ll: LastLayer, D, P4, P2, f, Bm, Cm, y, lt, ls):

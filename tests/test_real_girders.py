@@ -163,19 +163,19 @@ def test_damaged_girder_run_finds_the_segment_and_reports_it(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("extra", "method", "field"),
+    ("extra", "method", "field", "args"),
     [
-        ("", "ensemble", "model.EI_segments"),
-        ("", "bpinn", "model.EI_segments"),
-        ('[model]\nnoise = "ar1"\n', "ensemble", "model.noise"),
-        ('[model]\nnoise = "ar1"\n', "bpinn", "model.noise"),
+        ("", "ensemble", "model.EI_segments", []),
+        ("", "bpinn", "model.EI_segments", []),
+        ('[model]\nnoise = "ar1"\n', "bpinn", "model.noise", ["--bpinn-variant", "full"]),
     ],
 )
 def test_methods_refuse_what_they_cannot_describe_before_anything_runs(
-    tmp_path, extra, method, field
+    tmp_path, extra, method, field, args
 ):
-    """A PINN method asked for EI per segment, or for the AR(1) likelihood (only the reference has it): exit 2,
-    one line naming the field, nothing written, before the reference (which would take minutes) runs."""
+    """A PINN method asked for EI per segment, or the full-weight B-PINN for the AR(1) likelihood (the
+    reference, the ensemble and the last-layer B-PINN have it): exit 2, one line naming the field, nothing
+    written, before the reference (which would take minutes) runs."""
     cfg = tmp_path / "c.toml"
     text = (REPO / "examples" / "damaged-girder.toml").read_text()
     if extra:
@@ -183,7 +183,7 @@ def test_methods_refuse_what_they_cannot_describe_before_anything_runs(
     cfg.write_text(text)
     out = tmp_path / "out"
     r = _cli("run", "--snr", "30", "--method", f"modal,{method}" if method != "modal" else "modal",
-             "--config", str(cfg), "--out", str(out), "--quiet")  # fmt: skip
+             "--config", str(cfg), "--out", str(out), "--quiet", *args)  # fmt: skip
     assert r.returncode == 2, r.stderr[-2000:]
     assert field in r.stderr and "Traceback" not in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1

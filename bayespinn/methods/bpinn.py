@@ -75,7 +75,14 @@ class BPINN(Method):
 
 
 class LastLayerBPINN(BPINN):
-    """NUTS on log EI and log sigma, the network's output weights integrated out exactly."""
+    """NUTS on log EI and log sigma (and the AR(1) noise coefficient), the network's output weights
+    integrated out exactly."""
+
+    def check(self, data, config) -> None:
+        # AR(1) noise is in its likelihood (`uq.pinn_ar1`); the girder model is checked as for white noise
+        from ..uq.pinn_ar1 import as_white
+
+        super().check(data, as_white(config))
 
     def _sampler(self):
         from ..uq.bpinn import lastlayer_posterior
@@ -85,6 +92,18 @@ class LastLayerBPINN(BPINN):
 
 class FullWeightBPINN(BPINN):
     """NUTS on every hidden weight, log EI and log sigma (output weights integrated out exactly)."""
+
+    def check(self, data, config) -> None:
+        if config.model.noise != "iid":
+            from ..errors import InputError
+
+            raise InputError(
+                "model.noise",
+                config.model.noise,
+                "'iid' for the full-weight B-PINN (its sampler has no AR(1) likelihood); the last-layer "
+                "B-PINN (--bpinn-variant last-layer), the deep ensemble and the modal reference have it",
+            )
+        super().check(data, config)
 
     def _sampler(self):
         from ..uq.bpinn_full import full_posterior

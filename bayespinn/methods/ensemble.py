@@ -32,6 +32,12 @@ class DeepEnsemble(Method):
     Settings = EnsembleSettings
     modules = ("bayespinn.methods.ensemble", "bayespinn.uq.ensemble_batch")
 
+    def check(self, data, config) -> None:
+        # AR(1) noise is in its likelihood (`uq.pinn_ar1`); the girder model is checked as for white noise
+        from ..uq.pinn_ar1 import as_white
+
+        super().check(data, as_white(config))
+
     def batches(self) -> bool:
         """On a GPU the members of many datasets' ensembles train as one network (`ensemble_batch`)."""
         from ..uq.ensemble import _batched
@@ -41,7 +47,7 @@ class DeepEnsemble(Method):
     def infer_many(self, datas, config, *, seeds):
         """The posterior of each dataset (same girder model, one seed each): on a GPU their ensembles train
         as one network (`uq.ensemble_batch.ensemble_posteriors`), elsewhere `infer` runs on each in turn."""
-        if not self.batches():
+        if not self.batches() or config.model.noise != "iid":  # AR(1): one ensemble at a time
             return [self.infer(d, config, seed=sd) for d, sd in zip(datas, seeds, strict=True)]
         from ..uq.ensemble_batch import ensemble_posteriors
         from ..uq.priors import NoisePrior

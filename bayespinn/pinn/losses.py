@@ -10,7 +10,8 @@ With xi = x/L, tau = t/T, u = U w and EI = EI_ref exp(s) (see `problem.Scales`):
 * IC (Eq. 13): mean(w^2) + mean(w_tau^2) at tau = 0 (the sum of the two squared terms).
 * BC (Eq. 14): mean(w^2) + mean(w_xixi^2) at xi = 0 and xi = 1.
 * data (Eq. 15, 22-23): mean(r^2), r = (a_u u + a_xx u_xx - value) / s_i with s_i the row scale
-  (`Problem.row_scales`): deflection rows a_u = 1, strain rows a_xx = -y.
+  (`Problem.row_scales`): deflection rows a_u = 1, strain rows a_xx = -y; with AR(1) noise
+  (`Problem.noise_ar1`) r whitened along each sensor's series first (`whiten_rows`).
 
 `Objective` combines them: fixed weights, or the paper's adaptive weights alpha_k = L_k / min_k L_k
 (detached, recomputed each step). With `Problem.noise_sd` set the objective is *posterior-scaled*:
@@ -120,10 +121,20 @@ def data_prediction(j: Jet, pt: ProblemTensors) -> Tensor:
     return pred
 
 
+def whiten_rows(x: Tensor, pt: ProblemTensors) -> Tensor:
+    """Rows of x (M, P, ...) along the data points whitened for AR(1) noise (`ProblemTensors.whiten`):
+    x_k -> (x_k - rho x_(k-1)) / sqrt(1 - rho^2) for every non-first sample of a series; x itself for white
+    noise."""
+    if pt.whiten is None:
+        return x
+    cur, prev, rho, c = pt.whiten
+    return x.index_copy(1, cur, (x[:, cur] - rho * x[:, prev]) * c)
+
+
 def data_residual(model: PINN, pt: ProblemTensors, engine: str = "taylor") -> Tensor:
     """r (M, P): scaled misfit (a_u w + a_xx w_xixi) - value at the data points."""
     j = model.jet(pt.xi, pt.tau, data_order(pt), 0, engine=engine)
-    return data_prediction(j, pt) - pt.value
+    return whiten_rows(data_prediction(j, pt) - pt.value, pt)
 
 
 def field_jets(
@@ -151,7 +162,7 @@ def terms_from_jets(
         "pde": (pde_residual_from_jet(jets["pde"], ei_ratio, *col.pde, pt, images) ** 2).mean(-1),
         "ic": ic_loss(jets["ic"]),
         "bc": bc_loss(jets["bc"]),
-        "data": ((data_prediction(jets["data"], pt) - pt.value) ** 2).mean(-1),
+        "data": (whiten_rows(data_prediction(jets["data"], pt) - pt.value, pt) ** 2).mean(-1),
     }
 
 

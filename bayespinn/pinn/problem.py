@@ -84,6 +84,9 @@ class Problem:
     anchor : None or (loc, sd): a Gaussian term 0.5 ((log EI - loc) / sd)^2 on log EI [log N m^2];
         loc may be a sequence (M,), one anchor per member
     duration : float or None, T [s]; default max(vehicle duration, last data time)
+    noise_ar1 : None or rho in (-1, 1): the noise is AR(1) with coefficient rho along each sensor's series
+        (`uq.ar1`), and the data term is the sum of squares of the whitened (scaled) residuals; one layout
+        of the data only
     """
 
     beam: Beam
@@ -94,6 +97,7 @@ class Problem:
     noise_sd: float | Sequence[float] | None = None
     anchor: tuple[float | Sequence[float], float] | None = None
     duration: float | None = None
+    noise_ar1: float | None = None
 
     def __post_init__(self) -> None:
         data = self.data if isinstance(self.data, tuple | list) else (self.data,)
@@ -117,6 +121,15 @@ class Problem:
                 )
             if np.ndim(self.noise_sd):
                 object.__setattr__(self, "noise_sd", tuple(float(v) for v in sds))
+        if self.noise_ar1 is not None:
+            rho = float(self.noise_ar1)
+            if not (abs(rho) < 1.0):
+                raise ValueError(f"noise_ar1 must lie in (-1, 1), got {self.noise_ar1}")
+            if any(not np.array_equal(d.t, first.t) for d in data[1:]):
+                raise ValueError(
+                    "noise_ar1 needs one layout (the same sample times) for all datasets"
+                )
+            object.__setattr__(self, "noise_ar1", rho)
         if self.duration is None:
             T = max(self.vehicle.duration(self.beam.length), max(float(d.t.max()) for d in data))
             object.__setattr__(self, "duration", T)
@@ -233,6 +246,14 @@ class Problem:
             loc, sd = self.anchor
             loc = np.broadcast_to(np.asarray(loc, float), (members,)) - math.log(sc.EI_ref)
             anchor = (t(loc), float(sd))
+        whiten = None
+        if self.noise_ar1:  # rho = 0 is the white-noise objective exactly
+            from ..uq.ar1 import AR1Noise
+
+            ar = AR1Noise.of(ds[0])
+            idx = lambda a: torch.as_tensor(np.asarray(a, np.int64), device=device)  # noqa: E731
+            rho = self.noise_ar1
+            whiten = (idx(ar.cur), idx(ar.prev), rho, 1.0 / math.sqrt(1.0 - rho * rho))
         return ProblemTensors(
             xi=t(xi),
             tau=t(tau),
@@ -250,6 +271,7 @@ class Problem:
             stiffness=sc.stiffness,
             inertia=sc.inertia,
             pde_norm=pde_norm,
+            whiten=whiten,
         )
 
 
@@ -263,7 +285,9 @@ class ProblemTensors:
     likelihood (a float, or a tensor (M,) when the members' noise sds differ); anchor : None or ((M,) loc of log(EI/EI_ref), sd); loads (J,) axle loads / P;
     delays (J,) entry times / T; speed v T / L; beta / L (a 0-d tensor, so a
     training schedule can change it in place without recompiling); stiffness = 1/48 and inertia coefficients;
-    pde_norm : 'peak' (PDE residual divided by the peak Gaussian intensity) or 'load' (by q = P / L).
+    pde_norm : 'peak' (PDE residual divided by the peak Gaussian intensity) or 'load' (by q = P / L);
+    whiten : None (white noise), or (current rows, previous rows, rho, 1 / sqrt(1 - rho^2)) of the AR(1)
+    noise series: the data rows are whitened (`losses.whiten_rows`) before they are squared.
     """
 
     xi: torch.Tensor
@@ -282,3 +306,4 @@ class ProblemTensors:
     stiffness: float
     inertia: float
     pde_norm: str = "peak"
+    whiten: tuple | None = None

@@ -41,7 +41,7 @@ import torch
 from torch import Tensor
 
 from .enrich import FreeVibration
-from .losses import data_order, moving_load, pde_scale
+from .losses import data_order, moving_load, pde_scale, whiten_rows
 from .problem import ProblemTensors
 from .sampling import Collocation
 from .taylor import Jet
@@ -69,6 +69,7 @@ class VaryingColumns:
     pde: tuple | None
     ic: tuple
     data: tuple
+    whiten: object = None  # the ProblemTensors whose AR(1) whitening the data rows take, or None
 
     def blocks(self, s: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """(G_fv (M, Df, Fv), G_vv (M, Fv, Fv), g_v (M, Fv)) at s (M,)."""
@@ -80,6 +81,8 @@ class VaryingColumns:
         G_vv = _gram(V0, V0) + _gram(V1, V1)
         xi, tau, kx, a_u, a_xx, r, Adf, bd = self.data
         Adv = _data_rows(self.fv.jet(xi, tau, kx, 0, s, detach=False), a_u, a_xx) * r
+        if self.whiten is not None:
+            Adv = whiten_rows(Adv, self.whiten)
         G_fv = G_fv + _gram(Adf, Adv)
         G_vv = G_vv + _gram(Adv, Adv)
         g_v = _gram(Adv, bd)[..., 0]
@@ -208,8 +211,8 @@ def head_system(
         rd = w("data", nd)
         a_u = pt.a_u.to(dd) if pt.needs_value else None
         a_xx = pt.a_xx.to(dd) if pt.needs_curvature else None
-        Ad = _data_rows(jd.map(lambda c: c.to(dd)), a_u, a_xx) * rd
-        bd = pt.value.to(dd).unsqueeze(-1) * rd
+        Ad = whiten_rows(_data_rows(jd.map(lambda c: c.to(dd)), a_u, a_xx) * rd, pt)
+        bd = whiten_rows(pt.value.to(dd).unsqueeze(-1) * rd, pt)
         P22 = P22 + _gram(Ad)
         q2 = q2 + _gram(Ad, bd)[..., 0]
         bb = bb + (bd**2).sum((1, 2))
@@ -229,7 +232,7 @@ def head_system(
                 )
             ic = (D(col.ic[0]), D(col.ic[1]), ri, D(ji.value * ri), D(ji.dt(1) * ri))
             data = (D(pt.xi), D(pt.tau), data_order(pt), a_u, a_xx, rd, Ad, bd)
-            vc = VaryingColumns(vary, pde, ic, data)
+            vc = VaryingColumns(vary, pde, ic, data, pt if pt.whiten is not None else None)
     return HeadSystem(P11, P12, P22, q1, q2, bb, vc)
 
 

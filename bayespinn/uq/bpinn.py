@@ -25,6 +25,7 @@ from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
 from ..threads import torch_threads
+from .ar1 import AR1Noise
 from .bpinn_core import (
     LastLayerPotential,
     assemble,
@@ -47,14 +48,17 @@ def nuts(
     pot: LastLayerPotential, z_map: np.ndarray, L: np.ndarray, s: NUTSSettings, seed, progress: bool
 ):
     """Run `s.chains` NUTS chains (one after another, each on its own seed) on the whitened potential, each
-    from a dispersed start (2 Laplace sds around the MAP); draws of z (chain, draw, 2) and the chains' runs
-    (sample statistics, warnings)."""
+    from a dispersed start (2 Laplace sds around the MAP); draws of z (chain, draw, 2, or 3 with AR(1) noise)
+    and the chains' runs (sample statistics, warnings)."""
     wpot = Whitened(pot, z_map, L)
     out, runs = [], []
     for c in range(s.chains):
         cs = seeding.child(seed, "pyro", c)
         u0 = valid_start(
-            wpot, torch.tensor(np.random.default_rng(cs).standard_normal(2), dtype=torch.float64)
+            wpot,
+            torch.tensor(
+                np.random.default_rng(cs).standard_normal(len(z_map)), dtype=torch.float64
+            ),
         )
         run = run_nuts(
             wpot,
@@ -82,7 +86,8 @@ def lastlayer_posterior(
     progress: bool = False,
     fit_seed=None,
 ) -> Posterior:
-    """Fit a PINN, then sample the last-layer B-PINN posterior of (EI, sigma) with NUTS."""
+    """Fit a PINN, then sample the last-layer B-PINN posterior of (EI, sigma) with NUTS; with `[model] noise =
+    "ar1"` the noise is AR(1) along each sensor's series and its coefficient is sampled too."""
     t0 = time.perf_counter()
     if len(data) == 0:
         return no_data(cfg, seed, t0)
@@ -93,7 +98,7 @@ def lastlayer_posterior(
     shift = log_shift(res, problem)
     with torch_threads(1):  # tiny linear algebra (see `threads`)
         draws, diag, pred, stats = _sample_last_layer(
-            res, problem, data, seed, profile, progress, noise, settings, ei_prior, shift
+            res, problem, data, seed, profile, progress, noise, settings, ei_prior, shift, cfg
         )
     return assemble(
         draws,
@@ -111,12 +116,13 @@ def lastlayer_posterior(
 
 
 def _sample_last_layer(
-    res, problem, data, seed, profile, progress, noise, settings, ei_prior, shift
+    res, problem, data, seed, profile, progress, noise, settings, ei_prior, shift, cfg
 ):
-    """NUTS on (log theta, log sigma) of the last-layer model: z draws (chain, draw, 2),
+    """NUTS on (log theta, log sigma[, atanh rho]) of the last-layer model: z draws (chain, draw, 2 or 3),
     diagnostics, predictor and the chains' sample statistics."""
+    ar1 = AR1Noise.of(data) if cfg.model.noise == "ar1" else None
     _, ll, pot, z_map, L = last_layer_map(
-        res, problem, data, seed, noise, settings, ei_prior, shift
+        res, problem, data, seed, noise, settings, ei_prior, shift, ar1=ar1
     )
     log.info("[bpinn] NUTS: %s", VARIANT)
     s = NUTSSettings.for_profile(profile)
@@ -133,5 +139,11 @@ def _sample_last_layer(
             "threshold": ll.vibration_threshold,
         },
     }
-    pred = LastLayerPredictor(ll, draws[:, :, 0].ravel(), draws[:, :, 1].ravel(), shift)
+    pred = LastLayerPredictor(
+        ll,
+        draws[:, :, 0].ravel(),
+        draws[:, :, 1].ravel(),
+        shift,
+        draws[:, :, 2].ravel() if ar1 is not None else None,
+    )
     return draws, diag, pred, sample_stats(runs)

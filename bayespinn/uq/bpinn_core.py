@@ -20,8 +20,10 @@ import torch
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
+from .ar1 import lag1
 from .lastlayer import LastLayer, identified
 from .nuts import laplace_factor, map_estimate, problems
+from .pinn_ar1 import AR1Posterior
 from .posterior import Posterior, mcmc_diagnostics
 from .priors import EIPrior, NoisePrior, prior_only
 
@@ -48,7 +50,9 @@ def resolve_variant(name: str, profile: str) -> str:
 
 
 class LastLayerPotential:
-    """-log posterior of z = (log theta, log sigma); theta = EI / EI_ref before the beta correction."""
+    """-log posterior of z = (log theta, log sigma[, atanh rho]); theta = EI / EI_ref before the beta
+    correction, rho the AR(1) noise coefficient where the last-layer model has AR(1) noise (uniform prior on
+    (-1, 1), `ar1.AR1Noise.log_prior`)."""
 
     def __init__(self, ll: LastLayer, ei_prior: EIPrior, noise: NoisePrior, log_shift: float):
         self.ll, self.ei_prior, self.noise, self.shift = ll, ei_prior, noise, log_shift
@@ -67,7 +71,13 @@ class LastLayerPotential:
     def __call__(self, params: dict) -> torch.Tensor:
         z = params["z"]
         lt, ls = z[0], z[1]
-        return -(self.ll.log_marginal(lt, ls) + self.log_prior(lt, ls))
+        if self.ll.ar1 is None:
+            return -(self.ll.log_marginal(lt, ls) + self.log_prior(lt, ls))
+        za = z[2]
+        prior_rho = -2.0 * (
+            za.abs() + torch.log1p(torch.exp(-2.0 * za.abs()))
+        )  # log sech^2, + const
+        return -(self.ll.log_marginal(lt, ls, za) + self.log_prior(lt, ls) + prior_rho)
 
 
 def warm_start_fit(
@@ -116,10 +126,11 @@ def log_shift(res, problem) -> float:
 
 
 def last_layer_map(
-    res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=None
+    res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=None, ar1=None
 ):
-    """The fit's last-layer model, its potential in (log theta, log sigma), the MAP there and the Laplace
-    factor: (model, LastLayer, potential, z_map, L)."""
+    """The fit's last-layer model, its potential in (log theta, log sigma[, atanh rho]), the MAP there and the
+    Laplace factor: (model, LastLayer, potential, z_map, L). With ``ar1`` (`ar1.AR1Noise` of the data) the
+    noise is AR(1), its coefficient starting at the fit residuals' lag-1 autocorrelation."""
     model = res.model("cpu")
     rng = np.random.default_rng(seeding.stream(seed, "collocation"))
     ll = LastLayer(
@@ -134,10 +145,14 @@ def last_layer_map(
         beta_rel=settings.beta_rel,
         images=settings.images,
         vary_first_mode=vary_first_mode,
+        noise=ar1,
     )
     pot = LastLayerPotential(ll, ei_prior, noise, shift)
     sigma0 = max(math.sqrt(ll.fit_rss / max(ll.n, 1)), noise.low * 10)
-    z_map = map_estimate(pot, np.array([math.log(ll.theta_fit), math.log(sigma0)]))
+    z0 = [math.log(ll.theta_fit), math.log(sigma0)]
+    if ar1 is not None:
+        z0.append(math.atanh(min(max(lag1(ar1.series, ll.fit_resid), -0.95), 0.95)))
+    z_map = map_estimate(pot, np.array(z0))
     return model, ll, pot, z_map, laplace_factor(pot, z_map)
 
 
@@ -164,7 +179,10 @@ def assemble(
     posterior moved from the fit it linearises."""
     log_ei = draws[:, :, 0] + shift
     EI, sigma = np.exp(log_ei), np.exp(draws[:, :, 1])
+    rho = np.tanh(draws[:, :, 2]) if draws.shape[-1] > 2 else None
     diag = {**mcmc_diagnostics(EI), **diag}
+    if rho is not None:
+        diag["noise_ar1"] = mcmc_diagnostics(rho)
     trouble = problems(diag)
     converged = not trouble
     if not converged:
@@ -197,13 +215,13 @@ def assemble(
             )
             warnings.warn("B-PINN: " + msg, RuntimeWarning, stacklevel=2)
             info["warnings"] = [msg]
-    return Posterior(
-        "bpinn",
-        EI,
-        sigma,
+    kw = dict(
         diagnostics=diag,
         info=info,
         runtime_s=time.perf_counter() - t0,
         predictor=pred,
         sample_stats=stats,
     )
+    if rho is not None:
+        return AR1Posterior("bpinn", EI, sigma, ar1=rho, **kw)
+    return Posterior("bpinn", EI, sigma, **kw)

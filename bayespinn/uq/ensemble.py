@@ -57,6 +57,7 @@ from ..config import Config
 from ..data.measurements import Measurements
 from ..threads import torch_threads
 from .lastlayer import IDENTIFIED_FRACTION, LastLayer, LastLayerPredictor
+from .pinn_ar1 import AR1Posterior
 from .posterior import Posterior
 from .priors import EIPrior, NoisePrior, prior_only
 from .shared_fit import key as fit_key
@@ -80,14 +81,25 @@ SIGMA_GRID_HALF_WIDTH = 1.2
 
 @dataclass(frozen=True)
 class SigmaGrid:
-    """p(log sigma | EI, y) of a last-layer model on a grid (log-uniform prior on sigma)."""
+    """p(log sigma | EI, y) of a last-layer model on a grid (log-uniform prior on sigma); with AR(1) noise
+    p(log sigma, z | EI, y) on a grid of both (``z`` the axis of z = atanh rho, ``prob`` (sigma, z))."""
 
     log_sigma: np.ndarray
     prob: np.ndarray
+    z: np.ndarray | None = None
 
     @property
     def mode(self) -> float:
-        return float(np.exp(self.log_sigma[int(np.argmax(self.prob))]))
+        """sigma's mode (of its marginal where the grid has a z axis)."""
+        p = self.prob if self.z is None else self.prob.sum(axis=1)
+        return float(np.exp(self.log_sigma[int(np.argmax(p))]))
+
+    @property
+    def z_mode(self) -> float | None:
+        """The mode of z = atanh rho's marginal, or None for white noise."""
+        if self.z is None:
+            return None
+        return float(self.z[int(np.argmax(self.prob.sum(axis=0)))])
 
     def draws(self, k: int, rng: np.random.Generator) -> np.ndarray:
         """k draws of sigma: a grid cell by its probability, uniform within it."""
@@ -95,11 +107,24 @@ class SigmaGrid:
         i = rng.choice(self.prob.size, size=k, p=self.prob)
         return np.exp(self.log_sigma[i] + h * (rng.random(k) - 0.5))
 
+    def draws_ar1(self, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """k joint draws of (sigma, rho) from the two-dimensional grid (a cell by its probability, uniform
+        within it)."""
+        hs, hz = self.log_sigma[1] - self.log_sigma[0], self.z[1] - self.z[0]
+        flat = rng.choice(self.prob.size, size=k, p=self.prob.ravel())
+        i, j = np.unravel_index(flat, self.prob.shape)
+        u = rng.random((2, k)) - 0.5
+        return np.exp(self.log_sigma[i] + hs * u[0]), np.tanh(self.z[j] + hz * u[1])
+
 
 def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
     """The noise level's posterior for one member at its fitted EI (see the module docstring); with the
-    SNR-conditioned noise prior its log-normal density is added (as in the B-PINN)."""
+    SNR-conditioned noise prior its log-normal density is added (as in the B-PINN). With AR(1) noise the
+    joint posterior of sigma and the coefficient (`ar1_grid`)."""
     import torch
+
+    if ll.ar1 is not None:
+        return ar1_grid(ll, noise)
 
     center = 0.5 * math.log(max(ll.fit_rss, 1e-300) / max(ll.n, 1))
     grid = center + np.linspace(-SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_POINTS)
@@ -118,6 +143,71 @@ def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
         )
     p = np.exp(lp - lp.max())
     return SigmaGrid(grid, p / p.sum())
+
+
+#: the AR(1) noise grid: points per axis, and its half-width in Laplace sds of each axis
+AR1_GRID_POINTS = 41
+AR1_GRID_HALF_WIDTH = 6.0
+
+
+def ar1_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
+    """p(log sigma, z | EI_fit, y) of a last-layer model with AR(1) noise, z = atanh rho under rho's uniform
+    prior, on a grid of AR1_GRID_POINTS^2 around its mode (+-AR1_GRID_HALF_WIDTH Laplace sds of each): the
+    mode by L-BFGS from the fit residuals' level and lag-1 autocorrelation, the sds from the Hessian there."""
+    import torch
+    from scipy.optimize import minimize
+
+    from .ar1 import Z_MAX, lag1
+
+    T = lambda v: torch.tensor(v, dtype=torch.float64)  # noqa: E731
+    lt = T(math.log(ll.theta_fit))
+
+    def logp(ls, z):
+        out = ll.log_marginal(lt, ls, z) - 2.0 * (
+            z.abs() + torch.log1p(torch.exp(-2.0 * z.abs()))
+        )  # rho uniform: log sech^2 z + const
+        if noise.kind == "snr":
+            out = out - 0.5 * ((ls - math.log(noise.center)) / noise.log_sd) ** 2
+        return out
+
+    def neg(v):
+        x = torch.tensor(v, dtype=torch.float64, requires_grad=True)
+        f = -logp(x[0], x[1])
+        (g,) = torch.autograd.grad(f, x)
+        return float(f.detach()), g.numpy()
+
+    r0 = lag1(ll.ar1.series, ll.fit_resid)
+    x0 = [
+        0.5 * math.log(max(ll.fit_rss, 1e-300) / max(ll.n, 1)),
+        math.atanh(min(max(r0, -0.95), 0.95)),
+    ]
+    with torch_threads(1):
+        opt = minimize(neg, x0, jac=True, method="L-BFGS-B", bounds=[(None, None), (-Z_MAX, Z_MAX)])
+        H = torch.autograd.functional.hessian(lambda x: -logp(x[0], x[1]), T(opt.x))
+    H = H.numpy()
+    try:
+        cov = np.linalg.inv(H)
+        sd = np.sqrt(np.diag(cov))
+        ok = bool(np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0))
+    except np.linalg.LinAlgError:
+        ok = False
+    if not ok:  # no curvature at the optimum: a wide grid
+        log.warning(
+            "[ensemble] the AR(1) noise posterior has no curvature at its mode; using a wide grid"
+        )
+        sd = np.array([0.2, 0.2])
+    h = AR1_GRID_HALF_WIDTH
+    ls_ax = opt.x[0] + np.linspace(-h * sd[0], h * sd[0], AR1_GRID_POINTS)
+    z_ax = np.clip(opt.x[1] + np.linspace(-h * sd[1], h * sd[1], AR1_GRID_POINTS), -Z_MAX, Z_MAX)
+    if z_ax[0] == z_ax[-1]:
+        z_ax = np.linspace(Z_MAX - 2 * h * sd[1], Z_MAX, AR1_GRID_POINTS) * np.sign(opt.x[1])
+    with torch.no_grad(), torch_threads(1):
+        # z outer: the last layer reuses its first-mode block across sigma (`LastLayer._vary_block`)
+        lp = np.array([[float(logp(T(a), T(b))) for a in ls_ax] for b in z_ax]).T
+    p = np.exp(lp - lp.max())
+    if max(p[0].max(), p[-1].max(), p[:, 0].max(), p[:, -1].max()) > 1e-4:
+        log.warning("[ensemble] the AR(1) noise posterior reaches the edge of its grid")
+    return SigmaGrid(ls_ax, p / p.sum(), z_ax)
 
 
 def pool_log_ei(
@@ -145,10 +235,18 @@ def pool_log_ei(
 
 
 def _rto_data(
-    data: Measurements, sigma: float, M: int, rng: np.random.Generator
+    data: Measurements, sigma: float, M: int, rng: np.random.Generator, rho: float | None = None
 ) -> tuple[Measurements, ...]:
+    """M perturbed copies of the data: y + sigma e, e white, or AR(1) with coefficient rho along the series."""
+    if rho is None:
+        return tuple(
+            data.with_values(data.value + sigma * rng.standard_normal(len(data))) for _ in range(M)
+        )
+    from ..data.synthetic import ar1_noise  # the series and recursion `simulate` uses
+
     return tuple(
-        data.with_values(data.value + sigma * rng.standard_normal(len(data))) for _ in range(M)
+        data.with_values(data.value + sigma * ar1_noise(rng.standard_normal(len(data)), data, rho))
+        for _ in range(M)
     )
 
 
@@ -180,16 +278,21 @@ class MemberTask:
     seed: object  # the ensemble's SeedSequence
     noise: NoisePrior
     noise_sd: float | None = None  # phase 2: sigma_hat
+    noise_ar1: float | None = (
+        None  # phase 2 with AR(1) noise: rho_hat (the objective whitens with it)
+    )
     anchor: tuple[float, float] | None = None  # phase 2: (its log EI anchor, sd)
     init_state: dict | None = None  # phase 2: its phase-1 state
     progress: bool = False
 
 
 def _last_layer(
-    model, m: int, base, data: Measurements, seed, settings, index: int | None = None
+    model, m: int, base, data: Measurements, seed, settings, index: int | None = None, ar1=False
 ) -> LastLayer:
     """Member m's last-layer model (its pseudo-observation points from (seed, m)); `index` is its place in
-    `model` when that differs from m (several ensembles in one network)."""
+    `model` when that differs from m (several ensembles in one network); ``ar1``: AR(1) noise."""
+    from .ar1 import AR1Noise
+
     rng = np.random.default_rng(seeding.child(seed, "collocation", m))
     return LastLayer(
         model,
@@ -202,6 +305,7 @@ def _last_layer(
         n_ic=settings.n_ic,
         beta_rel=settings.beta_rel,
         images=settings.images,
+        noise=AR1Noise.of(data) if ar1 else None,
     )
 
 
@@ -218,6 +322,7 @@ def train_member(task: MemberTask) -> dict:
             t.train_data,
             noise_sd=t.noise_sd,
             anchor=None if t.anchor is None else ([t.anchor[0]], t.anchor[1]),
+            noise_ar1=t.noise_ar1,
         )
         every = max(1, (s.epochs + s.lbfgs_iters) // 5)
 
@@ -246,7 +351,9 @@ def train_member(task: MemberTask) -> dict:
                 callback=report,
             )
         base = Problem.from_config(t.cfg, t.data)
-        ll = _last_layer(r.model("cpu"), t.m, base, t.data, t.seed, s)
+        ll = _last_layer(
+            r.model("cpu"), t.m, base, t.data, t.seed, s, ar1=t.cfg.model.noise == "ar1"
+        )
         out = {
             "EI": float(r.EI[0]),
             "beta_factor": float(r.beta_factor),
@@ -292,6 +399,7 @@ def _phase_batched(
     data,
     noise: NoisePrior,
     keep_last_layers: bool,
+    ar1: bool = False,
 ) -> _Phase:
     from ..pinn import fit
 
@@ -306,7 +414,7 @@ def _phase_batched(
     )
     model = r.model("cpu")
     with torch_threads(1):
-        lls = [_last_layer(model, m, base, data, seed, settings) for m in range(M)]
+        lls = [_last_layer(model, m, base, data, seed, settings, ar1=ar1) for m in range(M)]
     return _Phase(
         EI=np.atleast_1d(np.asarray(r.EI, float)),
         beta_factor=np.full(M, r.beta_factor),
@@ -383,11 +491,21 @@ def ensemble_posterior(
         )
     if p1.fit0 is not None:  # the B-PINN on the same data starts from it (`shared_fit`)
         remember(fit_key(base, settings, member_seed(seed), 0), p1.fit0)
+    ar1 = cfg.model.noise == "ar1"
     sigma_hat, anchors, pdata = rto_inputs(data, p1.grids, seed, ei_prior, M)
-    log.info("[ensemble] phase 2: randomise-then-optimise (sigma_hat = %.3g)", sigma_hat)
+    rho_hat = rto_rho(p1.grids)
+    log.info(
+        "[ensemble] phase 2: randomise-then-optimise (sigma_hat = %.3g%s)",
+        sigma_hat,
+        "" if rho_hat is None else f", AR(1) rho_hat = {rho_hat:.3f}",
+    )
     if batched:
         problem = Problem.from_config(
-            cfg, pdata, noise_sd=sigma_hat, anchor=(anchors, ei_prior.log_sd)
+            cfg,
+            pdata,
+            noise_sd=sigma_hat,
+            anchor=(anchors, ei_prior.log_sd),
+            noise_ar1=rho_hat,
         )
         p2 = _phase_batched(
             problem,
@@ -402,6 +520,7 @@ def ensemble_posterior(
             data,
             noise,
             True,
+            ar1,
         )
     else:
         p2 = _phase_tasks(
@@ -416,6 +535,7 @@ def ensemble_posterior(
                     seed,
                     noise,
                     noise_sd=sigma_hat,
+                    noise_ar1=rho_hat,
                     anchor=(float(anchors[m]), ei_prior.log_sd),
                     init_state=p1.states[m],
                     progress=not quiet,
@@ -431,8 +551,11 @@ def ensemble_posterior(
 
 
 def local_sd(ll: LastLayer, grid: SigmaGrid, ei_prior: EIPrior) -> float:
-    """A member's own width of log EI: the sd of its last-layer marginal at its noise level's mode."""
-    return ll.local_sd_log_theta(math.log(ll.theta_fit), math.log(grid.mode), ei_prior.log_sd)
+    """A member's own width of log EI: the sd of its last-layer marginal at its noise level's mode (and, with
+    AR(1) noise, its coefficient's)."""
+    return ll.local_sd_log_theta(
+        math.log(ll.theta_fit), math.log(grid.mode), ei_prior.log_sd, z=grid.z_mode
+    )
 
 
 def phase2_settings(settings):
@@ -449,7 +572,15 @@ def rto_inputs(data: Measurements, grids: list, seed, ei_prior: EIPrior, M: int)
     rng = np.random.default_rng(seeding.stream(seed, "noise"))
     eta = rng.standard_normal(M)
     anchors = ei_prior.loc + ei_prior.log_sd * eta
-    return sigma_hat, anchors, _rto_data(data, sigma_hat, M, rng)
+    return sigma_hat, anchors, _rto_data(data, sigma_hat, M, rng, rto_rho(grids))
+
+
+def rto_rho(grids: list) -> float | None:
+    """Phase 2's AR(1) coefficient: tanh of the median of the members' modes of z = atanh rho (None: white
+    noise)."""
+    if grids[0].z is None:
+        return None
+    return float(np.tanh(np.median([g.z_mode for g in grids])))
 
 
 def pooled_posterior(
@@ -486,8 +617,15 @@ def pooled_posterior(
     mu = float(np.mean(log_ei_m))
     draw_rng = np.random.default_rng(seeding.child(seed, "ensemble", 0))
     log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
-    sigma = np.concatenate([g.draws(-(-N_DRAWS // M), draw_rng) for g in grids])[:N_DRAWS]
-    sigma = sigma[draw_rng.permutation(N_DRAWS)]
+    rho = None
+    if grids[0].z is None:
+        sigma = np.concatenate([g.draws(-(-N_DRAWS // M), draw_rng) for g in grids])[:N_DRAWS]
+        sigma = sigma[draw_rng.permutation(N_DRAWS)]
+    else:  # AR(1): sigma and rho jointly, from each member's grid
+        sr = [g.draws_ar1(-(-N_DRAWS // M), draw_rng) for g in grids]
+        perm = draw_rng.permutation(N_DRAWS)
+        sigma = np.concatenate([a for a, _ in sr])[:N_DRAWS][perm]
+        rho = np.concatenate([b for _, b in sr])[:N_DRAWS][perm]
     ident = bool(math.sqrt(pooled) < IDENTIFIED_FRACTION * ei_prior.log_sd)
     info = {
         "members": M,
@@ -498,6 +636,14 @@ def pooled_posterior(
         "pooling": f"local (grid) variance of {lap_dof:g} members + between-member variance / {M} (the mean's Monte Carlo error)",
         "sigma_hat_rto": sigma_hat,
         "member_sigma_mode": [g.mode for g in grids],
+        **(
+            {
+                "member_noise_ar1_mode": [math.tanh(g.z_mode) for g in grids],
+                "rho_hat_rto": math.tanh(float(np.median([g.z_mode for g in grids]))),
+            }
+            if rho is not None
+            else {}
+        ),
         "member_first_mode_follows_EI": [ll.first_mode_varies for ll in lls],
         "identified": ident,
     }
@@ -530,19 +676,22 @@ def pooled_posterior(
                 np.full(64, math.log(ll.theta_fit)),
                 np.full(64, math.log(g.mode)),
                 math.log(base.EI_ref) - math.log(f),
+                None if g.z is None else np.full(64, g.z_mode),
             )
             for ll, g, f in zip(lls, grids, p2.beta_factor, strict=True)
         ]
     )
-    return Posterior(
-        "ensemble",
-        np.exp(log_ei)[None, :],
-        sigma[None, :],
+    kw = dict(
         diagnostics=diag,
         info=info,
         runtime_s=time.perf_counter() - t0 if runtime_s is None else runtime_s,
         predictor=predictor,
     )
+    if rho is not None:
+        return AR1Posterior(
+            "ensemble", np.exp(log_ei)[None, :], sigma[None, :], ar1=rho[None, :], **kw
+        )
+    return Posterior("ensemble", np.exp(log_ei)[None, :], sigma[None, :], **kw)
 
 
 class _MixturePredictor:

@@ -75,6 +75,7 @@ from ..pinn.losses import moving_load
 from ..pinn.network import PINN
 from ..pinn.problem import Problem
 from ..pinn.taylor import Jet
+from .ar1 import AR1Noise
 from .priors import EIPrior
 
 log = logging.getLogger(__name__)
@@ -134,6 +135,22 @@ def _cholesky(A: torch.Tensor) -> torch.Tensor:
     )
 
 
+def _t(X: torch.Tensor) -> torch.Tensor:
+    return X.T if X.dim() == 2 else X
+
+
+def _pieces(Xf, Xc, Xp, Yf, Yc, Yp) -> tuple:
+    """(Xf'Yf, Xc'Yc, Xc'Yp + Xp'Yc, Xp'Yp): with rho and c2 = 1 / (1 - rho^2), X'P(rho)Y is
+    Xf'Yf + c2 (Xc'Yc - rho (Xc'Yp + Xp'Yc) + rho^2 Xp'Yp) for the first (f), current (c) and previous (p)
+    rows of the noise series (`ar1.AR1Noise`)."""
+    return (_t(Xf) @ Yf, _t(Xc) @ Yc, _t(Xc) @ Yp + _t(Xp) @ Yc, _t(Xp) @ Yp)
+
+
+def _log_cosh(z: torch.Tensor) -> torch.Tensor:
+    a = z.abs()
+    return a + torch.log1p(torch.exp(-2.0 * a)) - math.log(2.0)
+
+
 class LastLayer:
     """Exact marginal likelihood of (theta, sigma) for one trained member; see the module docstring.
 
@@ -152,6 +169,9 @@ class LastLayer:
     beta_rel, images : the Gaussian load as the PINN was trained on it (`TrainSettings.beta_rel`, `.images`)
     vary_first_mode : None (default) lets the vibration test decide whether the first mode follows theta
         (`first_mode_varies`, with `vibration_z2` and `vibration_threshold`); True or False forces it
+    noise : None (white noise) or the data's AR(1) series (`uq.ar1.AR1Noise`): the data rows are then
+        whitened with the coefficient rho = tanh(z) that every method takes as its ``z`` (default `self.z`,
+        0 until set), and the log marginal carries the whitening's Jacobian (`ar1` module docstring)
     """
 
     def __init__(
@@ -167,6 +187,7 @@ class LastLayer:
         beta_rel: float | None = None,
         images: bool = False,
         vary_first_mode: bool | None = None,
+        noise: AR1Noise | None = None,
     ):
         model = model.member(member).double()  # one member, float64, for every basis evaluation
         member = 0
@@ -190,6 +211,12 @@ class LastLayer:
         self.xi_d, self.tau_d = T(data.x / sc.L), T(data.t / sc.T)
         self.kx_d = 2 if np.any(a_xx != 0) else 0
         y = T(data.value)
+        self.ar1, self.z = noise, 0.0
+        if noise is not None:
+            if noise.n != len(data):
+                raise ValueError(f"the AR(1) series cover {noise.n} points, the data {len(data)}")
+            L_ = lambda a: torch.as_tensor(np.asarray(a, np.int64))  # noqa: E731
+            self._first, self._cur, self._prev = L_(noise.first), L_(noise.cur), L_(noise.prev)
         # pseudo-observation points: PDE (non-dimensional residual, as in training but unscaled by beta),
         # boundary (u = u_xx = 0 at both ends) and initial (u = u_t = 0); drawn in this order from rng
         self.xi_f, self.tau_f = T(rng.uniform(0, 1, n_pde)), T(rng.uniform(0, 1, n_pde))
@@ -216,7 +243,8 @@ class LastLayer:
         self.beta_fit = beta_fit
         self.n = y.numel()
         self.k = D.shape[1]
-        self.fit_rss = float(((D @ beta_fit - y) ** 2).sum())
+        self.fit_resid = (y - D @ beta_fit).numpy()
+        self.fit_rss = float((self.fit_resid**2).sum())
         self.y, self.yy = y, float(y @ y)
         self._gram(D, P4, P2, Bm, Cm)
         # does the first mode's frequency carry information here? (module docstring)
@@ -277,10 +305,18 @@ class LastLayer:
     def _gram(self, D, P4, P2, Bm, Cm):
         """Gram matrices of the columns that stay fixed (all but the varying first mode's), from the design rows."""
         f, y = self.f, self.y
+        self.__dict__.pop(
+            "_vary_cache", None
+        )  # rows changed: `_vary_block`'s kept block is not theirs
         self.kf = kf = self.k - self.nv
         Df, P4f, P2f, Cf = D[:, :kf], P4[:, :kf], P2[:, :kf], Cm[:, :kf]
         self.Df, self.Cf = Df, Cf
         self.G_dd, self.g_dy = Df.T @ Df, Df.T @ y
+        if self.ar1 is not None:  # the pieces of D'P(rho)D, D'P(rho)y, y'P(rho)y (`_data_gram`)
+            f_, c_, p_ = self._first, self._cur, self._prev
+            self._ar_G = _pieces(Df[f_], Df[c_], Df[p_], Df[f_], Df[c_], Df[p_])
+            self._ar_g = _pieces(Df[f_], Df[c_], Df[p_], y[f_], y[c_], y[p_])
+            self._ar_yy = _pieces(y[f_], y[c_], y[p_], y[f_], y[c_], y[p_])
         self.G44 = P4f.T @ P4f / self.s_f**2
         self.G42 = (P4f.T @ P2f + P2f.T @ P4f) / self.s_f**2
         self.G22 = P2f.T @ P2f / self.s_f**2
@@ -340,19 +376,65 @@ class LastLayer:
         Cv = torch.cat([ji.value, ji.dt(1)])
         return Dv, Cv
 
-    def _system(self, log_theta: torch.Tensor, log_sigma: torch.Tensor):
-        """Precision A and vector b of the stiffness-scaled weights gamma = theta beta given (theta, sigma)."""
+    def _z(self, z) -> torch.Tensor | None:
+        """The AR(1) coefficient's z = atanh(rho) to use (a float64 tensor), or None for white noise."""
+        if self.ar1 is None:
+            return None
+        z = self.z if z is None else z
+        return z if torch.is_tensor(z) else torch.tensor(float(z), dtype=torch.float64)
+
+    def _whiten(self, X: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
+        """Rows of X (n, ...) whitened along the noise series: x_k -> (x_k - rho x_(k-1)) / sqrt(1 - rho^2)
+        for every non-first sample (differentiable in z)."""
+        rho, c = torch.tanh(z), torch.cosh(z)
+        return X.index_copy(0, self._cur, (X[self._cur] - rho * X[self._prev]) * c)
+
+    def _data_gram(self, z: torch.Tensor | None):
+        """(D'PD, D'Py, y'Py) of the fixed columns, P the noise's precision times sigma^2 (I for white noise)."""
+        if z is None:
+            return self.G_dd, self.g_dy, self.yy
+        rho, c2 = torch.tanh(z), torch.cosh(z) ** 2
+        return tuple(
+            a + c2 * (b - rho * x + rho**2 * d)
+            for a, b, x, d in (self._ar_G, self._ar_g, self._ar_yy)
+        )
+
+    def _vary_block(self, log_theta: torch.Tensor, z: torch.Tensor | None):
+        """(Df'P Dv, Dv'P Dv, Dv'P y, Cv) of the varying first mode at theta (P: the noise's precision times
+        sigma^2). Where no gradient is asked for, the last one is kept and reused at the same (theta, z): a
+        grid over sigma at one theta and rho computes it once."""
+        grad = torch.is_grad_enabled() and (
+            log_theta.requires_grad or (z is not None and z.requires_grad)
+        )
+        key = None if grad else (float(log_theta), None if z is None else float(z))
+        hit = self.__dict__.get("_vary_cache")
+        if key is not None and hit is not None and hit[0] == key:
+            return hit[1]
+        Dv, Cv = self._varying(log_theta)
+        Df, y = self.Df, self.y
+        if z is not None:
+            Df, Dv, y = self._whiten(Df, z), self._whiten(Dv, z), self._whiten(y, z)
+        out = (Df.T @ Dv, Dv.T @ Dv, Dv.T @ y, Cv)
+        if key is not None:
+            self._vary_cache = (key, out)
+        return out
+
+    def _system(self, log_theta: torch.Tensor, log_sigma: torch.Tensor, z=None):
+        """Precision A and vector b of the stiffness-scaled weights gamma = theta beta given (theta, sigma, rho),
+        with 1 / sigma^2 and the data's whitened sum of squares y'Py."""
+        z = self._z(z)
+        G_dd, g_dy, yy = self._data_gram(z)
         it = torch.exp(-log_theta)
         inv_s2 = torch.exp(-2 * log_sigma)
         d2 = inv_s2 * it**2  # the data rows are D / theta
-        A = self.G_dd * d2 + self.G44 + it * self.G42 + it**2 * self.G22 + self.G_c
-        b = self.g_dy * (inv_s2 * it) + self.g4f + it * self.g2f
+        A = G_dd * d2 + self.G44 + it * self.G42 + it**2 * self.G22 + self.G_c
+        b = g_dy * (inv_s2 * it) + self.g4f + it * self.g2f
         if self.fv is not None:
-            Dv, Cv = self._varying(log_theta)
+            DfDv, DvDv, Dvy, Cv = self._vary_block(log_theta, z)
             s_i2 = self.s_i**2
-            A_fv = self.Df.T @ Dv * d2 + self.Cf.T @ Cv / s_i2
-            A_vv = Dv.T @ Dv * d2 + Cv.T @ Cv / s_i2
-            b_v = Dv.T @ self.y * (inv_s2 * it)
+            A_fv = DfDv * d2 + self.Cf.T @ Cv / s_i2
+            A_vv = DvDv * d2 + Cv.T @ Cv / s_i2
+            b_v = Dvy * (inv_s2 * it)
             if self.pde_v is not None:  # damped free vibrations leave a PDE residual
                 xi_f, tau_f, P4f, P2f, f = self.pde_v
                 jf = self._fv_jet(xi_f, tau_f, 4, 2, log_theta)
@@ -363,26 +445,32 @@ class LastLayer:
                 b_v = b_v + Rv.T @ f / s_f2
             A = torch.cat([torch.cat([A, A_fv], 1), torch.cat([A_fv.T, A_vv], 1)], 0)
             b = torch.cat([b, b_v])
-        return A + self.eye, b, inv_s2
+        return A + self.eye, b, inv_s2, yy, z
 
-    def log_marginal(self, log_theta: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
-        """log p(y, pseudo-observations | theta, sigma) up to a constant (differentiable scalar)."""
-        A, b, inv_s2 = self._system(log_theta, log_sigma)
+    def log_marginal(
+        self, log_theta: torch.Tensor, log_sigma: torch.Tensor, z=None
+    ) -> torch.Tensor:
+        """log p(y, pseudo-observations | theta, sigma[, rho = tanh z]) up to a constant (differentiable
+        scalar); ``z`` defaults to `self.z` and is ignored for white noise."""
+        A, b, inv_s2, yy, z = self._system(log_theta, log_sigma, z)
         Lc = _cholesky(A)
-        z = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
+        w = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
         logdet = 2 * torch.log(torch.diagonal(Lc)).sum()
-        return (
-            -0.5 * (self.yy * inv_s2 + self.ff) + 0.5 * (b @ z) - 0.5 * logdet - self.n * log_sigma
-        )
+        out = -0.5 * (yy * inv_s2 + self.ff) + 0.5 * (b @ w) - 0.5 * logdet - self.n * log_sigma
+        if z is not None:  # the whitening's Jacobian, -((n - m)/2) log(1 - rho^2)
+            out = out + (self.ar1.n - self.ar1.m) * _log_cosh(z)
+        return out
 
     def weights_posterior(
-        self, log_theta: float, log_sigma: float
+        self, log_theta: float, log_sigma: float, z: float | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Mean (k,) and covariance (k, k) of the output weights beta = gamma / theta given theta and sigma."""
+        """Mean (k,) and covariance (k, k) of the output weights beta = gamma / theta given theta, sigma (and
+        the AR(1) coefficient's z, default `self.z`)."""
         with torch.no_grad():
-            A, b, _ = self._system(
+            A, b, *_ = self._system(
                 torch.tensor(log_theta, dtype=torch.float64),
                 torch.tensor(log_sigma, dtype=torch.float64),
+                z,
             )
             Lc = _cholesky(A)
             mean = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
@@ -390,34 +478,45 @@ class LastLayer:
         it = math.exp(-log_theta)
         return mean * it, cov * it**2
 
-    def laplace_sd_log_theta(self, log_theta: float, log_sigma: float, prior_sd: float) -> float:
+    def laplace_sd_log_theta(
+        self, log_theta: float, log_sigma: float, prior_sd: float, z: float | None = None
+    ) -> float:
         """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's; nan when the
         log marginal is not concave in log theta there (no local width to report)."""
         lt = torch.tensor(log_theta, dtype=torch.float64, requires_grad=True)
         ls = torch.tensor(log_sigma, dtype=torch.float64)
-        (g,) = torch.autograd.grad(self.log_marginal(lt, ls), lt, create_graph=True)
+        (g,) = torch.autograd.grad(self.log_marginal(lt, ls, z), lt, create_graph=True)
         (h,) = torch.autograd.grad(g, lt)
         if not -float(h) > 0:
             return float("nan")
         return 1.0 / math.sqrt(-float(h) + 1.0 / prior_sd**2)
 
     def local_sd_log_theta(
-        self, log_theta: float, log_sigma: float, prior_sd: float, points: int = GRID_POINTS
+        self,
+        log_theta: float,
+        log_sigma: float,
+        prior_sd: float,
+        points: int = GRID_POINTS,
+        z: float | None = None,
     ) -> float:
         """sd of log theta under the log marginal (sigma held) times the prior's curvature, on a grid
         around log_theta: the Laplace width where the marginal is Gaussian, and the true width where it is
         not (at 10 dB the first mode's frequency makes it skewed and heavy-tailed: measured on the quick
         start's members, Laplace 1.8 % against 2.5 % from NUTS). The grid starts at +-GRID_HALF_WIDTH Laplace
         sds (or the prior sd where there is no curvature) and doubles until its ends hold less than
-        GRID_EDGE of the peak density; nan when the density never falls (no local width)."""
-        lap = self.laplace_sd_log_theta(log_theta, log_sigma, prior_sd)
+        GRID_EDGE of the peak density; nan when the density never falls (no local width). sigma (and the
+        AR(1) coefficient's z, default `self.z`) are held."""
+        lap = self.laplace_sd_log_theta(log_theta, log_sigma, prior_sd, z)
         half = GRID_HALF_WIDTH * lap if math.isfinite(lap) else prior_sd
         ls = torch.tensor(log_sigma, dtype=torch.float64)
         for _ in range(GRID_DOUBLINGS + 1):
             g = log_theta + np.linspace(-half, half, points)
             with torch.no_grad():
                 lp = np.array(
-                    [float(self.log_marginal(torch.tensor(v, dtype=torch.float64), ls)) for v in g]
+                    [
+                        float(self.log_marginal(torch.tensor(v, dtype=torch.float64), ls, z))
+                        for v in g
+                    ]
                 )
             lp = lp - 0.5 * ((g - log_theta) / prior_sd) ** 2
             p = np.exp(lp - lp.max())
@@ -429,9 +528,17 @@ class LastLayer:
         return float("nan")
 
     def predictive(
-        self, x, t, kx: int, draws_log_theta, draws_log_sigma, rng: np.random.Generator
+        self,
+        x,
+        t,
+        kx: int,
+        draws_log_theta,
+        draws_log_sigma,
+        rng: np.random.Generator,
+        draws_z=None,
     ) -> np.ndarray:
-        """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)."""
+        """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)
+        (and AR(1) coefficient's z, `draws_z`; default `self.z`)."""
         sc = self.sc
         T = lambda a: torch.as_tensor(np.array(a, float).ravel(), dtype=torch.float64)  # noqa: E731
         xi, tau = T(x) / sc.L, T(t) / sc.T
@@ -439,8 +546,9 @@ class LastLayer:
         Phi_f = j.dx(kx)[:, : self.kf]
         scale = sc.U / sc.L**kx
         out = np.empty((len(draws_log_theta), Phi_f.shape[0]))
-        for i, (lt, ls) in enumerate(zip(draws_log_theta, draws_log_sigma, strict=True)):
-            mean, cov = self.weights_posterior(float(lt), float(ls))
+        zs = [None] * len(draws_log_theta) if draws_z is None else draws_z
+        for i, (lt, ls, zz) in enumerate(zip(draws_log_theta, draws_log_sigma, zs, strict=True)):
+            mean, cov = self.weights_posterior(float(lt), float(ls), zz)
             Phi = Phi_f
             if self.fv is not None:
                 with torch.no_grad():
@@ -464,17 +572,25 @@ def identified(log_ei_draws: np.ndarray, prior: EIPrior) -> bool:
 class LastLayerPredictor:
     """Posterior predictive of a last-layer model: deflection, curvature or moment for (EI, sigma) draws."""
 
-    def __init__(self, ll: LastLayer, log_theta: np.ndarray, log_sigma: np.ndarray, shift: float):
-        self.ll, self.lt, self.ls, self.shift = ll, log_theta, log_sigma, shift
+    def __init__(
+        self,
+        ll: LastLayer,
+        log_theta: np.ndarray,
+        log_sigma: np.ndarray,
+        shift: float,
+        z: np.ndarray | None = None,
+    ):
+        self.ll, self.lt, self.ls, self.shift, self.z = ll, log_theta, log_sigma, shift, z
 
     def __call__(
         self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
     ) -> np.ndarray:
         rng = rng or np.random.default_rng(0)
         idx = rng.choice(self.lt.size, size=min(n_draws, self.lt.size), replace=False)
+        z = None if self.z is None else self.z[idx]
         if quantity == "deflection":
-            return self.ll.predictive(x, t, 0, self.lt[idx], self.ls[idx], rng)
+            return self.ll.predictive(x, t, 0, self.lt[idx], self.ls[idx], rng, z)
         if quantity in ("curvature", "moment"):
-            k = self.ll.predictive(x, t, 2, self.lt[idx], self.ls[idx], rng)
+            k = self.ll.predictive(x, t, 2, self.lt[idx], self.ls[idx], rng, z)
             return -np.exp(self.lt[idx] + self.shift)[:, None] * k if quantity == "moment" else k
         raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
