@@ -20,8 +20,7 @@ import torch
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
-from .ar1 import lag1
-from .lastlayer import LastLayer, identified
+from .lastlayer import LastLayer, identified, log_prior_z
 from .nuts import laplace_factor, map_estimate, problems
 from .pinn_ar1 import AR1Posterior
 from .posterior import Posterior, mcmc_diagnostics
@@ -74,9 +73,7 @@ class LastLayerPotential:
         if self.ll.ar1 is None:
             return -(self.ll.log_marginal(lt, ls) + self.log_prior(lt, ls))
         za = z[2]
-        prior_rho = -2.0 * (
-            za.abs() + torch.log1p(torch.exp(-2.0 * za.abs()))
-        )  # log sech^2, + const
+        prior_rho = log_prior_z(za)
         return -(self.ll.log_marginal(lt, ls, za) + self.log_prior(lt, ls) + prior_rho)
 
 
@@ -151,7 +148,7 @@ def last_layer_map(
     sigma0 = max(math.sqrt(ll.fit_rss / max(ll.n, 1)), noise.low * 10)
     z0 = [math.log(ll.theta_fit), math.log(sigma0)]
     if ar1 is not None:
-        z0.append(math.atanh(min(max(lag1(ar1.series, ll.fit_resid), -0.95), 0.95)))
+        z0.append(ll.z_start())
     z_map = map_estimate(pot, np.array(z0))
     return model, ll, pot, z_map, laplace_factor(pot, z_map)
 
@@ -181,9 +178,10 @@ def assemble(
     EI, sigma = np.exp(log_ei), np.exp(draws[:, :, 1])
     rho = np.tanh(draws[:, :, 2]) if draws.shape[-1] > 2 else None
     diag = {**mcmc_diagnostics(EI), **diag}
-    if rho is not None:
-        diag["noise_ar1"] = mcmc_diagnostics(rho)
     trouble = problems(diag)
+    if rho is not None:  # the noise coefficient's chains must have mixed too
+        diag["noise_ar1"] = mcmc_diagnostics(rho)
+        trouble += [f"AR(1) coefficient: {p}" for p in problems(diag["noise_ar1"])]
     converged = not trouble
     if not converged:
         msg = "B-PINN NUTS did not converge: " + "; ".join(trouble)

@@ -58,6 +58,14 @@ sds from the modal one, with the right width); with the scale times 3, 10 or 30 
 than 0.15 sd). Only without any physics (times 1000) does the width grow. All Gram matrices
 are precomputed, so one evaluation costs one (H+1) x (H+1) Cholesky factorisation (float64, torch,
 differentiable for NUTS).
+
+AR(1) noise (`noise`, `uq.ar1`): the data term becomes y ~ N(D gamma / theta, sigma^2 R(rho)), R the AR(1)
+correlation within each sensor's series. Whitening the rows along each series (x_k -> (x_k - rho x_(k-1)) /
+sqrt(1 - rho^2)) turns it into the white model of the whitened rows, with the Jacobian -((n - m)/2)
+log(1 - rho^2) for m series, so the marginal stays exact. Every data Gram product X'R^-1 Y splits into four
+fixed pieces (first, current and previous rows, `_pieces`) combined at each rho, so the fixed columns cost
+nothing more per evaluation; the varying first mode's rows are whitened at each (theta, rho). rho enters
+as z = atanh rho (the `z` argument of every method; `self.z`, 0 until set, where it is held).
 """
 
 from __future__ import annotations
@@ -75,7 +83,7 @@ from ..pinn.losses import moving_load
 from ..pinn.network import PINN
 from ..pinn.problem import Problem
 from ..pinn.taylor import Jet
-from .ar1 import AR1Noise
+from .ar1 import AR1Noise, lag1
 from .priors import EIPrior
 
 log = logging.getLogger(__name__)
@@ -149,6 +157,12 @@ def _pieces(Xf, Xc, Xp, Yf, Yc, Yp) -> tuple:
 def _log_cosh(z: torch.Tensor) -> torch.Tensor:
     a = z.abs()
     return a + torch.log1p(torch.exp(-2.0 * a)) - math.log(2.0)
+
+
+def log_prior_z(z: torch.Tensor) -> torch.Tensor:
+    """log density of z = atanh rho under a uniform rho on (-1, 1): log sech^2 z (the torch twin of
+    `ar1.AR1Noise.log_prior`, differentiable)."""
+    return -2.0 * _log_cosh(z)
 
 
 class LastLayer:
@@ -328,6 +342,11 @@ class LastLayer:
         self.pde_v = None
         if self.fv is not None and not self.fv.pde_exact:
             self.pde_v = (self.xi_f, self.tau_f, P4f, P2f, f)
+
+    def z_start(self) -> float:
+        """A start for z = atanh rho: the fit residuals' lag-1 autocorrelation along the noise series (held
+        inside |rho| <= 0.95)."""
+        return math.atanh(min(max(lag1(self.ar1.series, self.fit_resid), -0.95), 0.95))
 
     def noise_mode(self, log_theta: float) -> float:
         """The noise level sigma that maximises the marginal likelihood at theta = exp(log_theta)."""
