@@ -319,9 +319,8 @@ class LastLayer:
     def _gram(self, D, P4, P2, Bm, Cm):
         """Gram matrices of the columns that stay fixed (all but the varying first mode's), from the design rows."""
         f, y = self.f, self.y
-        self.__dict__.pop(
-            "_vary_cache", None
-        )  # rows changed: `_vary_block`'s kept block is not theirs
+        # rows changed: `_vary_block`'s kept block is not theirs
+        self.__dict__.pop("_vary_cache", None)
         self.kf = kf = self.k - self.nv
         Df, P4f, P2f, Cf = D[:, :kf], P4[:, :kf], P2[:, :kf], Cm[:, :kf]
         self.Df, self.Cf = Df, Cf
