@@ -79,10 +79,33 @@ class LastLayerBPINN(BPINN):
     integrated out exactly."""
 
     def check(self, data, config) -> None:
+        from ..uq.girder_pinn import check_girder, is_girder_model
+
+        if is_girder_model(
+            config
+        ):  # EI per segment, springs or an uncertain load (`uq.girder_pinn`)
+            return check_girder(config, data, self.display)
         # AR(1) noise is in its likelihood (`uq.pinn_ar1`); the girder model is checked as for white noise
         from ..uq.pinn_ar1 import as_white
 
         super().check(data, as_white(config))
+
+    def infer(self, data, config, *, seed):
+        from ..uq.girder_pinn import girder_bpinn_posterior, is_girder_model, member_fit_seed
+
+        if not is_girder_model(config):
+            return super().infer(data, config, seed=seed)
+        from ..uq.shared_fit import ensemble_seed
+
+        return girder_bpinn_posterior(
+            data,
+            config,
+            seed=seeding.stream(seed, "pyro"),
+            profile=self.settings.profile,
+            # the deep ensemble's member 0 network on the same data (same seed, same training)
+            fit_seed=member_fit_seed(ensemble_seed(seed), 0),
+            progress=self.progress,
+        )
 
     def _sampler(self):
         from ..uq.bpinn import lastlayer_posterior

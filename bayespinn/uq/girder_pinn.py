@@ -1,0 +1,562 @@
+"""PINNs on real girders: EI per segment, rotational springs at the bearings, an uncertain axle-load factor.
+
+The network's output, in the units of `pinn.problem.Scales` (u = U w, x = L xi, t = T tau), is
+
+    u(x, t) = c_E E(x, t; phi) + U sum_j c_j N_j(xi, tau),
+
+phi = (log EI per segment, log k per support when `supports = "springs"`, log load factor when inferred).
+
+* **The enrichment E** is the girder's own moving-load response at phi for the stated axle loads (load factor
+  1): the finite-element modal model of "Real girders I" (`physics.fe_modal.GirderModalModel`: modes of the
+  FE eigenproblem of the girder with these segment EIs and springs, a static correction for the truncated
+  ones). It is the generalisation of the uniform girder's enrichment (`pinn.enrich`: the forced moving-load
+  response and the tied free vibrations of a pinned, uniform beam), and it assumes neither pins nor a uniform
+  EI: it is recomputed at every phi tried. Its coefficient c_E is free. E solves the girder's equation
+  (EI(x) E_xx)_xx + mu E_tt = f with the stated loads f, meets the support conditions and starts at rest,
+  so its contribution to those residuals is exact: (c_E - lambda) f in the PDE rows (lambda the load
+  factor), and nothing in the boundary and initial rows. Only its values at the data are computed (by the
+  modal model; their derivatives in phi by central differences, `_EColumn`).
+* **The network N** (tanh MLP of (xi, tau), the hidden layers trained, the output layer c solved by least
+  squares at every step: variable projection, as `pinn.varpro`) carries what the enrichment does not. Its
+  physics is the girder's, with stiffness along the span:
+
+      (EI(x) N_xx)_xx = sum_s EI_s (chi_s N_xxxx + 2 chi_s' N_xxx + chi_s'' N_xx),
+
+  chi_s the smoothed indicator of segment s (logistic steps at the segment edges, of width the Gaussian
+  load's, `EDGE_WIDTH_REL` L, the resolution at which the PINN's PDE sees a point load; the chi_s sum to 1
+  exactly), and the supports' conditions u = 0 and EI u_xx -/+ k u_x = 0 at the left / right end
+  (pinned: EI u_xx = 0), written as (EI w_xixi -/+ kappa w_xi) / (EI + kappa) with kappa = k L / EI_ref so the
+  row stays O(1) from a pin to a clamp. Every residual is linear in the output weights (c, c_E), so each
+  term is a Gram matrix assembled from precomputed pieces at any phi (`Pieces`, `assemble`).
+
+Training (`train_fit`): phi starts at the enrichment-only least-squares fit (the FE model alone: c = 0,
+c_E = lambda); the hidden layers are trained by Adam on the sum of squares of the scaled residuals at the
+solved output layer (data / sigma_0, physics rows / `TRAIN_PHYSICS_SD`); every `theta_every` steps phi is
+re-solved by L-BFGS on the reduced objective (the output layer profiled out) plus minus the log prior.
+
+The last layer (`GirderLastLayer`): with the hidden layers fixed, the output weights are integrated out
+exactly, as in `uq.lastlayer` (Gaussian data rows y ~ N(D(phi) c, sigma^2), physics pseudo-observations
+with sds from the fit's RMS residuals, `PDE_SD_FACTOR` for the PDE rows, weight prior N(0, s_w^2) with s_w
+`WEIGHT_PRIOR_FACTOR` times the largest fitted weight), giving log p(y | phi, sigma) exactly. The physics
+rows and the weight prior enter as the output layer's *normalised* prior given phi (`log_marginal`): counted
+as observations, their precision's determinant (the PDE rows scale as EI_s^2) and their own best residual
+would inform phi through the network's approximation error rather than through the data.
+
+The B-PINN (last-layer variant) runs NUTS on (phi, log sigma) in whitened coordinates (`uq.nuts`). The deep
+ensemble trains M networks from their own starts, samples each member's exact last-layer posterior by
+adaptive importance sampling (`importance_sample`: multivariate t proposals, the first at twice the
+Laplace sd, each next at the weighted moments of the last; the effective sample size is reported and
+checked), and pools the members in equal shares, so the spread between the networks adds to each one's
+width. Not randomise-then-optimise, as on the uniform girder (`uq.ensemble`): with five segments the
+posterior of log EI is far from Gaussian (the segments next to the supports are skewed, the Laplace sd of
+the middle ones 0.4x the reference's), and uncorrected randomise-then-optimise draws on the last layer gave
+sds 0.56-0.71x the reference's (smoke profile, damaged Exeter girder at 30 dB, 20 draws per member).
+
+What this does not do: AR(1) noise on a girder (refused, exit 2), damping in the network's PDE rows (the
+enrichment carries the girder's modal damping; the correction N is undamped).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from .. import seeding
+from ..config import Config
+from ..data.measurements import Measurements
+from ..errors import InputError
+from .girder_net import (
+    RIDGE,
+    TRAIN_PHYSICS_SD,
+    GirderFit,
+    GirderNetSettings,
+    GirderProblem,
+    Points,
+    Scales_,
+    _detach,
+    _solve,
+    data_terms,
+    enrichment_column,
+    physics,
+    pieces,
+    train_fit,
+)
+from .girder_posterior import GirderPosterior
+from .girder_reference import GirderPredictor, GirderReference, check_segments
+from .lastlayer import MIN_PSEUDO_SD, PDE_SD_FACTOR, WEIGHT_PRIOR_FACTOR
+from .posterior import mcmc_diagnostics
+from .sampler import ESS_MIN
+
+log = logging.getLogger(__name__)
+
+#: adaptive importance sampling of a member's last-layer posterior: stages, the t proposals' degrees of
+#: freedom, the first proposal's scale on the Laplace covariance (the posterior of a segment next to a
+#: support is skewed and up to twice the Laplace width), and the later proposals' on the weighted covariance
+IS_STAGES, IS_DOF, IS_INFLATE, IS_COV_SCALE = 4, 5.0, 2.0, 1.2
+#: members scattering more than this many times their own sd are flagged (as `uq.ensemble`)
+MAX_SCATTER_RATIO = 3.0
+
+
+def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
+    """The seed of the deep ensemble's member m network (the last-layer B-PINN trains member 0's)."""
+    return seeding.child(ensemble_seed, "init", m)
+
+
+def is_girder_model(cfg: Config) -> bool:
+    """Whether the analysis model is a real girder (EI per segment, springs, or an inferred load factor)."""
+    m = cfg.model
+    return m.EI_segments > 1 or m.supports != "pinned" or cfg.infers_load_factor
+
+
+def check_girder(cfg: Config, data: Measurements, display: str) -> None:
+    """Refuse what the girder PINN does not describe (exit 2, naming the field)."""
+    if cfg.model.noise != "iid":
+        raise InputError(
+            "model.noise",
+            cfg.model.noise,
+            f"'iid' for the {display} on a girder with EI per segment, springs or an uncertain load "
+            "(its AR(1) likelihood is for the uniform, pinned girder); --method modal has it",
+        )
+    check_segments(cfg, data)
+
+
+# --------------------------------------------------------------------------------------------------
+# the last layer: output weights integrated out
+
+
+class GirderLastLayer:
+    """log p(y | phi, sigma) with the output layer (c, c_E) integrated out exactly (module docstring), for a
+    trained network on fixed points."""
+
+    def __init__(self, problem: GirderProblem, fit: GirderFit, settings: GirderNetSettings, seed):
+        self.problem = problem
+        gen = torch.Generator().manual_seed(seeding.int_seed(seed))
+        self.pts = Points.draw(settings, gen)
+        with torch.no_grad():
+            self.P = _detach(pieces(problem, fit.net, self.pts, problem.y))
+        # pseudo-sds from the fit's own residuals at its phi (a function of the fit, stated not tuned)
+        self.s_f, self.s_b, self.s_i, self.s_w, self.c_fit = self._scales(fit.phi)
+        self.n = problem.y.size
+
+    def _scales(self, phi: np.ndarray):
+        pr, P = self.problem, self.P
+        phit = torch.as_tensor(phi)
+        sc = Scales_(pr.sigma0, TRAIN_PHYSICS_SD, TRAIN_PHYSICS_SD, TRAIN_PHYSICS_SD, None)
+        E = enrichment_column(pr, phit)
+        Ap, gp, _ = physics(pr, P, phit, sc)
+        Ad, gd, _ = data_terms(pr, P, E, sc.sigma)
+        c, _ = _solve(Ap + Ad, gp + gd)
+        theta, left, right, lam = pr.coefficients(phit)
+        cn, ce = c[:-1], c[-1]
+        a = torch.cat([theta, torch.ones(1, dtype=torch.float64)])
+        Gnn = torch.einsum("i,j,ijDE->DE", a, a, P.KK)
+        Gne = torch.einsum("i,iD->D", a, P.Kf)
+        rf = cn @ Gnn @ cn + 2 * (ce - lam) * (Gne @ cn) + (ce - lam) ** 2 * P.ff
+        Gb = P.vv + torch.einsum("a,b,abDE->DE", left, left, P.mm[0])
+        Gb = Gb + torch.einsum("a,b,abDE->DE", right, right, P.mm[1])
+        k = P.counts
+        rms = lambda ss, m: math.sqrt(max(float(ss), 0.0) / m)  # noqa: E731
+        s_f = max(PDE_SD_FACTOR * rms(rf, k["pde"]), MIN_PSEUDO_SD)
+        s_b = max(rms(cn @ Gb @ cn, 2 * k["bc"]), MIN_PSEUDO_SD)
+        s_i = max(rms(cn @ P.ic @ cn, 2 * k["ic"]), MIN_PSEUDO_SD)
+        s_w = WEIGHT_PRIOR_FACTOR * float(c.abs().max())
+        return s_f, s_b, s_i, s_w, c.detach()
+
+    def scales(self, sigma) -> Scales_:
+        return Scales_(sigma, self.s_f, self.s_b, self.s_i, self.s_w)
+
+    def log_marginal(self, phi: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
+        """log p(y | phi, sigma) up to a constant independent of both (differentiable).
+
+        The physics rows and the weight prior act as the output layer's prior given phi, normalised:
+        c ~ N(mu_p, A_p^-1). Counted as observations instead, the normaliser's log|A_p(phi)| / 2 (the PDE
+        rows' precision grows as EI_s^2) and the physics' own minimum would inform phi through the network's
+        approximation error rather than the data (`uq.lastlayer` docstring); so
+        y ~ N(D mu_p, sigma^2 I + D A_p^-1 D'), computed through A = A_p + D'D / sigma^2."""
+        pr = self.problem
+        sigma = torch.exp(log_sigma)
+        sc = self.scales(sigma)
+        E = enrichment_column(pr, phi)
+        Ap, gp, _ = physics(pr, self.P, phi, sc)
+        Ad, gd, kd = data_terms(pr, self.P, E, sigma)
+        mu, Lp = _solve(Ap, gp)
+        b = gp + gd
+        c, L = _solve(Ap + Ad, b)
+        return (
+            -0.5 * (kd + mu @ gp - b @ c)
+            - torch.log(torch.diagonal(L)).sum()
+            + torch.log(torch.diagonal(Lp)).sum()
+            - self.n * log_sigma
+        )
+
+    def log_post(self, z: torch.Tensor) -> torch.Tensor:
+        """log posterior of z = (phi, log sigma): marginal + prior (log-uniform sigma)."""
+        phi = z[:-1]
+        return self.log_marginal(phi, z[-1]) + self.problem.log_prior(phi)
+
+    @torch.no_grad()
+    def log_post_many(self, Z: np.ndarray) -> np.ndarray:
+        """`log_post` at many points Z (W, dim + 1) at once (no gradients); -inf outside the prior's support."""
+        pr, P = self.problem, self.P
+        Z = np.atleast_2d(Z)
+        out = np.full(Z.shape[0], -np.inf)
+        ok = pr.post.inside(Z[:, :-1])
+        if not ok.any():
+            return out
+        z = torch.as_tensor(Z[ok])
+        phi, ls = z[:, :-1], z[:, -1]
+        W = phi.shape[0]
+        sig2 = torch.exp(2 * ls)
+        E = torch.as_tensor(pr.enrichment(Z[ok, : pr.n_phys]))  # (W, n)
+        theta, left, right, lam = pr.coefficients(phi)
+        D = P.dd.shape[0]
+        a = torch.cat([theta, torch.ones(W, 1, dtype=torch.float64)], 1)
+        Gnn = torch.einsum("wi,wj,ijDE->wDE", a, a, P.KK)
+        Gne = torch.einsum("wi,iD->wD", a, P.Kf)
+        Ap = torch.zeros(W, D + 1, D + 1, dtype=torch.float64)
+        Ap[:, :D, :D] = Gnn
+        Ap[:, :D, D] = Ap[:, D, :D] = Gne
+        Ap[:, D, D] = P.ff
+        Ap = Ap / self.s_f**2
+        gp = lam[:, None] * torch.cat([Gne, P.ff.expand(W, 1)], 1) / self.s_f**2
+        Gb = P.vv + torch.einsum("wa,wb,abDE->wDE", left, left, P.mm[0])
+        Gb = Gb + torch.einsum("wa,wb,abDE->wDE", right, right, P.mm[1])
+        Ap[:, :D, :D] += Gb / self.s_b**2 + P.ic / self.s_i**2
+        Ap = Ap + torch.eye(D + 1, dtype=torch.float64) / self.s_w**2
+        y = torch.as_tensor(pr.y)
+        dE = E @ P.Phi_d  # (W, D)
+        Ad = torch.zeros_like(Ap)
+        Ad[:, :D, :D] = P.dd
+        Ad[:, :D, D] = Ad[:, D, :D] = dE
+        Ad[:, D, D] = (E * E).sum(1)
+        Ad = Ad / sig2[:, None, None]
+        gd = torch.cat([P.dy.expand(W, D), (E @ y)[:, None]], 1) / sig2[:, None]
+        kd = P.yy / sig2
+
+        def chol_solve(A, g):
+            d = A.diagonal(dim1=1, dim2=2).clamp_min(1e-300)
+            L, info = torch.linalg.cholesky_ex(A + torch.diag_embed(RIDGE * d))
+            return torch.cholesky_solve(g[..., None], L)[..., 0], L, info
+
+        mu, Lp, i1 = chol_solve(Ap, gp)
+        b = gp + gd
+        c, L, i2 = chol_solve(Ap + Ad, b)
+        lm = (
+            -0.5 * (kd + (mu * gp).sum(1) - (b * c).sum(1))
+            - torch.log(L.diagonal(dim1=1, dim2=2)).sum(1)
+            + torch.log(Lp.diagonal(dim1=1, dim2=2)).sum(1)
+            - self.n * ls
+        )
+        lp = pr.post.log_prior(Z[ok, :-1])
+        val = lm.numpy() + lp
+        val[(i1 != 0).numpy() | (i2 != 0).numpy() | ~np.isfinite(val)] = -np.inf
+        out[ok] = val
+        return out
+
+    def map(self, z0: np.ndarray) -> np.ndarray:
+        z = torch.tensor(z0, dtype=torch.float64, requires_grad=True)
+        opt = torch.optim.LBFGS([z], lr=1.0, max_iter=100, line_search_fn="strong_wolfe")
+
+        def closure():
+            opt.zero_grad()
+            if not self.problem.inside(z.detach().numpy()[:-1]):
+                return torch.as_tensor(math.inf, dtype=torch.float64)
+            v = -self.log_post(z)
+            v.backward()
+            return v
+
+        opt.step(closure)
+        return z.detach().numpy().copy()
+
+    def grad(self, z: np.ndarray) -> np.ndarray:
+        zt = torch.tensor(z, dtype=torch.float64, requires_grad=True)
+        v = self.log_post(zt)
+        (gz,) = torch.autograd.grad(v, zt)
+        return gz.numpy()
+
+    def hessian(self, z: np.ndarray, h: float = 1e-4) -> np.ndarray:
+        """Hessian of the log posterior by central differences of its gradient."""
+        k = z.size
+        H = np.empty((k, k))
+        for i in range(k):
+            e = np.zeros(k)
+            e[i] = h
+            H[i] = (self.grad(z + e) - self.grad(z - e)) / (2 * h)
+        return 0.5 * (H + H.T)
+
+    def covariance(self, z: np.ndarray) -> np.ndarray:
+        """Laplace covariance at z (the negative Hessian's inverse, its eigenvalues floored at the prior's
+        precision so a flat direction falls back to the prior)."""
+        H = -self.hessian(z)
+        lam, V = np.linalg.eigh(H)
+        floor = 1.0 / float(np.max(np.r_[self.problem.post.sd, 1.0])) ** 2
+        lam = np.maximum(lam, floor)
+        return (V / lam) @ V.T
+
+    def sigma_mode(self, phi: np.ndarray) -> float:
+        """The log sigma maximising the marginal at phi (golden section on log sigma)."""
+        lo, hi = math.log(self.problem.sigma0) - 3.0, math.log(self.problem.sigma0) + 3.0
+        phit = torch.as_tensor(phi)
+        f = lambda s: float(self.log_marginal(phit, torch.as_tensor(s, dtype=torch.float64)))  # noqa: E731
+        r = (math.sqrt(5) - 1) / 2
+        a, b = lo, hi
+        c, d = b - r * (b - a), a + r * (b - a)
+        fc, fd = f(c), f(d)
+        for _ in range(40):
+            if fc > fd:
+                b, d, fd = d, c, fc
+                c = b - r * (b - a)
+                fc = f(c)
+            else:
+                a, c, fc = c, d, fd
+                d = a + r * (b - a)
+                fd = f(d)
+        return 0.5 * (a + b)
+
+
+# --------------------------------------------------------------------------------------------------
+# posteriors
+
+
+def _posterior(
+    problem: GirderProblem,
+    phi: np.ndarray,
+    sigma: np.ndarray,
+    method: str,
+    diagnostics: dict,
+    info: dict,
+    runtime: float,
+) -> GirderReference:
+    """The pipeline's Posterior of draws phi (chain, draw, dim), sigma (chain, draw)."""
+    lay = problem.layout
+    gp = GirderPosterior(
+        EI_segments=np.exp(phi[..., : lay.n_segments]),
+        rotational_stiffness=np.exp(phi[..., lay.springs]) if lay.infer_springs else None,
+        load_factor=np.exp(phi[..., lay.load]) if lay.infer_load else None,
+        sigma=sigma,
+        edges=np.linspace(0.0, problem.L, lay.n_segments + 1),
+        EI_nominal=problem.nominal,
+        diagnostics=diagnostics,
+        info=info,
+        runtime_s=runtime,
+        method=method,
+    )
+    return GirderReference(
+        method,
+        gp.EI,
+        gp.sigma,
+        diagnostics=diagnostics,
+        info={"EI_nominal": gp.EI_nominal, **info},
+        runtime_s=runtime,
+        predictor=GirderPredictor(problem.cfg, gp),
+        girder=gp,
+    )
+
+
+def _info(problem: GirderProblem, settings: GirderNetSettings, ll: GirderLastLayer | None) -> dict:
+    out: dict[str, Any] = {
+        "model": {
+            "EI_segments": problem.S,
+            "supports": problem.cfg.model.supports,
+            "load_factor": "inferred" if problem.infer_load else "fixed at 1",
+            "noise": "iid",
+        },
+        "network": (
+            f"{settings.depth} x {settings.width} tanh, enriched with the girder's FE modal response "
+            f"({problem.n_modes} modes and a static correction) at the current parameters"
+        ),
+        "enrichment_modes": problem.n_modes,
+        "steps": settings.steps,
+    }
+    if ll is not None:
+        out["pseudo_sd"] = {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i, "weights": ll.s_w}
+    return out
+
+
+def _log_t(Z: np.ndarray, mean: np.ndarray, L: np.ndarray, nu: float) -> np.ndarray:
+    """log density of the multivariate t (nu, mean, L L') at Z (N, d), up to a constant shared by all Z."""
+    u = np.linalg.solve(L, (Z - mean).T)
+    d = Z.shape[1]
+    return -0.5 * (nu + d) * np.log1p(np.sum(u * u, 0) / nu) - np.log(np.diag(L)).sum()
+
+
+def importance_sample(
+    ll: GirderLastLayer, z_map: np.ndarray, cov: np.ndarray, rng: np.random.Generator, settings
+) -> tuple[np.ndarray, dict]:
+    """Draws of one member's exact last-layer posterior by adaptive importance sampling (population Monte
+    Carlo): multivariate t proposals (`IS_DOF`), the first at the Laplace covariance times `IS_INFLATE^2`,
+    each next at the weighted mean and covariance of the last; returns `settings.is_draws` draws resampled
+    from the last stage, and its effective sample size."""
+    mean, C = z_map.copy(), cov * IS_INFLATE**2
+    d = z_map.size
+    ess = 0.0
+    for _stage in range(IS_STAGES):
+        L = np.linalg.cholesky(C + 1e-12 * np.eye(d) * np.trace(C) / d)
+        g = rng.standard_normal((settings.is_samples, d))
+        chi2 = rng.chisquare(IS_DOF, settings.is_samples)
+        Z = mean + (g @ L.T) * np.sqrt(IS_DOF / chi2)[:, None]
+        lw = ll.log_post_many(Z) - _log_t(Z, mean, L, IS_DOF)
+        w = np.exp(lw - lw.max())
+        w /= w.sum()
+        ess = float(1.0 / np.sum(w**2))
+        mean = w @ Z
+        R = Z - mean
+        C = (R * w[:, None]).T @ R * IS_COV_SCALE**2
+    idx = rng.choice(Z.shape[0], size=settings.is_draws, p=w)
+    return Z[idx], {"ess": ess, "max_weight": float(w.max()), "samples": settings.is_samples}
+
+
+def girder_ensemble_posterior(
+    data: Measurements,
+    cfg: Config,
+    *,
+    seed,
+    members: int = 5,
+    profile: str = "fast",
+    progress: bool = False,
+) -> GirderReference:
+    """Deep ensemble on a real girder: M networks from their own starts; each member's exact last-layer
+    posterior of (phi, log sigma) sampled by adaptive importance sampling; the members pooled in equal shares
+    (module docstring)."""
+    t0 = time.perf_counter()
+    settings = GirderNetSettings.for_profile(profile)
+    problem = GirderProblem(data, cfg)
+    draws, member_info = [], []
+    for m in range(members):
+        fs = member_fit_seed(seed, m)
+        fit = train_fit(problem, settings, fs, progress)
+        ll = GirderLastLayer(problem, fit, settings, seeding.stream(fs, "collocation"))
+        zmap = ll.map(np.r_[fit.phi, ll.sigma_mode(fit.phi)])
+        Z, is_info = importance_sample(
+            ll, zmap, ll.covariance(zmap), seeding.rng(fs, "noise"), settings
+        )
+        draws.append(Z)
+        member_info.append(
+            {
+                "EI_segments": np.exp(Z[:, : problem.S].mean(0)).tolist(),
+                "log_EI_sd": Z[:, : problem.S].std(0, ddof=1).tolist(),
+                "sigma": float(np.exp(np.median(Z[:, -1]))),
+                "train_s": fit.seconds,
+                **is_info,
+            }
+        )
+        log.info(
+            "[ensemble] member %d/%d: EI per segment %s (importance ESS %.0f)",
+            m + 1,
+            members,
+            ", ".join(f"{e:.4g}" for e in member_info[-1]["EI_segments"]),
+            is_info["ess"],
+        )
+    th = np.stack(draws)  # (member, draw, dim + 1)
+    # members' scatter of their means against their own widths (as `uq.ensemble.MAX_SCATTER_RATIO`)
+    means, sds = th.mean(1), th.std(1, ddof=1)
+    ratio = float(np.max(means.std(0, ddof=1) / np.mean(sds, 0))) if members > 1 else 0.0
+    min_ess = min(i["ess"] for i in member_info)
+    diagnostics = {
+        "members": members,
+        "scatter_ratio": ratio,
+        "importance_ess_min": min_ess,
+        "converged": bool(ratio <= MAX_SCATTER_RATIO and min_ess >= ESS_MIN),
+        "scheme": "each member's last-layer posterior by adaptive importance sampling; members pooled",
+    }
+    info = _info(problem, settings, None) | {"members": member_info}
+    return _posterior(
+        problem,
+        th[..., :-1].reshape(1, -1, problem.dim),
+        np.exp(th[..., -1]).reshape(1, -1),
+        "ensemble",
+        diagnostics,
+        info,
+        time.perf_counter() - t0,
+    )
+
+
+def girder_bpinn_posterior(
+    data: Measurements,
+    cfg: Config,
+    *,
+    seed,
+    profile: str = "fast",
+    fit_seed=None,
+    progress: bool = False,
+) -> GirderReference:
+    """Last-layer B-PINN on a real girder: NUTS on (phi, log sigma), output layer integrated out."""
+    from .nuts import (
+        NUTSSettings,
+        Whitened,
+        nuts_health,
+        problems,
+        run_nuts,
+        sample_stats,
+        valid_start,
+    )
+
+    t0 = time.perf_counter()
+    settings = GirderNetSettings.for_profile(profile)
+    problem = GirderProblem(data, cfg)
+    fs = fit_seed if fit_seed is not None else member_fit_seed(seeding.stream(seed, "ensemble"), 0)
+    fit = train_fit(problem, settings, fs, progress)
+    ll = GirderLastLayer(problem, fit, settings, seeding.stream(fs, "collocation"))
+    z0 = np.r_[fit.phi, ll.sigma_mode(fit.phi)]
+    zmap = ll.map(z0)
+    Lc = np.linalg.cholesky(ll.covariance(zmap))
+
+    def pot(params):
+        z = params["z"]
+        if not problem.inside(z.detach().numpy()[:-1]):
+            return torch.as_tensor(math.inf, dtype=torch.float64) + (z * 0).sum()
+        return -ll.log_post(z)
+
+    W = Whitened(pot, zmap, Lc)
+    ns = NUTSSettings.for_profile(profile)
+    chains = []
+    rng = seeding.rng(seed, "init")
+    for c in range(ns.chains):
+        u0 = valid_start(W, torch.as_tensor(rng.standard_normal(zmap.size)))
+        chains.append(
+            run_nuts(
+                W,
+                {"u": u0},
+                warmup=ns.warmup,
+                samples=ns.samples,
+                seed=seeding.child(seed, "pyro", c),
+                progress=progress,
+            )
+        )
+    z = np.stack([W.z_draws(ch.samples["u"]) for ch in chains])  # (chain, draw, dim + 1)
+    post = _posterior(problem, z[..., :-1], np.exp(z[..., -1]), "bpinn", {}, {}, 0.0)
+    per = {name: mcmc_diagnostics(d) for name, d in post.girder.draws().items()}
+    health = nuts_health(chains)
+    diag = {
+        "rhat": max(v["rhat"] for v in per.values()),
+        "ess_bulk": min(v["ess_bulk"] for v in per.values()),
+        "ess_tail": min(v["ess_tail"] for v in per.values()),
+        "per_parameter": per,
+        **health,
+        "variant": "last-layer",
+    }
+    why = problems(diag)
+    diag["converged"] = not why
+    diag["problems"] = why
+    info = _info(problem, settings, ll) | {"variant": "last-layer", "fit_s": fit.seconds}
+    post.girder.diagnostics = diag
+    post.girder.info = info
+    post.diagnostics = diag
+    post.info = {"EI_nominal": problem.nominal, **info}
+    post.sample_stats = sample_stats(chains)
+    post.runtime_s = post.girder.runtime_s = time.perf_counter() - t0
+    return post
+
+
+__all__ = [
+    "GirderNetSettings",
+    "check_girder",
+    "girder_bpinn_posterior",
+    "girder_ensemble_posterior",
+    "is_girder_model",
+]
