@@ -58,6 +58,7 @@ enrichment carries the girder's modal damping; the correction N is undamped).
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -70,6 +71,7 @@ from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
 from ..errors import InputError
+from ..threads import one_blas_thread, torch_threads
 from .girder_net import (
     RIDGE,
     TRAIN_PHYSICS_SD,
@@ -378,6 +380,19 @@ def _info(problem: GirderProblem, settings: GirderNetSettings, ll: GirderLastLay
     return out
 
 
+def _one_thread(fn):
+    """Run fn with one torch and one BLAS thread: its small dense algebra is fastest so, and its numbers are
+    then the same function of the seed whatever the machine's thread count (`bayespinn.threads`)."""
+
+    @functools.wraps(fn)
+    @one_blas_thread
+    def wrapper(*args, **kwargs):
+        with torch_threads(1):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
 def _log_t(Z: np.ndarray, mean: np.ndarray, L: np.ndarray, nu: float) -> np.ndarray:
     """log density of the multivariate t (nu, mean, L L') at Z (N, d), up to a constant shared by all Z."""
     u = np.linalg.solve(L, (Z - mean).T)
@@ -411,6 +426,7 @@ def importance_sample(
     return Z[idx], {"ess": ess, "max_weight": float(w.max()), "samples": settings.is_samples}
 
 
+@_one_thread
 def girder_ensemble_posterior(
     data: Measurements,
     cfg: Config,
@@ -476,6 +492,7 @@ def girder_ensemble_posterior(
     )
 
 
+@_one_thread
 def girder_bpinn_posterior(
     data: Measurements,
     cfg: Config,
