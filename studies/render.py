@@ -24,17 +24,16 @@ import common as c  # noqa: E402
 
 log = logging.getLogger("studies.render")
 
+#: pages gathered from the study files under <out>/<name>
+GATHERED = ("family", "girders", "girder_pinns", "fitcheck")
+
 
 def page_text(name: str, out: Path) -> str | None:
     """The markdown today's code renders for <out>/<name>.json (None when the JSON is not there)."""
     from bayespinn.report.markdown import render_markdown
 
     mod = importlib.import_module(name)
-    if name in (
-        "family",
-        "girders",
-        "fitcheck",
-    ):  # gathered from the study files under <out>/<name>
+    if name in GATHERED:  # gathered from the study files under <out>/<name>
         page = mod.gather(out)
         return render_markdown(mod.blocks(page)) if page["studies"] else None
     path = out / f"{name}.json"
@@ -65,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             c.write_markdown(out / f"{name}.md", mod.blocks(doc))
         log.info("rendered %s", out / f"{name}.md")
-    for name in ("family", "girders", "fitcheck"):
+    for name in GATHERED:
         mod = importlib.import_module(name)
         if mod.gather(out)["studies"]:
             mod.write_page(out)

@@ -209,3 +209,34 @@ def test_cli_runs_the_pinn_methods_on_a_girder_with_springs(tmp_path):
         assert m["fit_check"]["verdict"] in ("fits", "misfit")
         assert m["EI"]["ci90"][0] < m["EI"]["ci90"][1]
     assert (out / "report.md").exists()
+
+
+def test_pinn_coverage_study_runs_every_method_on_the_reference_datasets(tmp_path):
+    """`studies/girder_pinns.py` (1 replicate, smoke profile; the numbers are the plumbing's, not a claim):
+    coverage rows per method and parameter, z and sd ratio per segment, and a rerun that recomputes nothing."""
+    cfg = tmp_path / "g.toml"
+    cfg.write_text(
+        "[beam]\nEI = [1.03361e9, 7.2353e8]\n[model]\nEI_segments = 2\n[data]\nn_points = 60\n"
+    )
+    args = ["--config", str(cfg), "--replicates", "1", "--profile", "smoke", "--members", "2",
+            "--out", str(tmp_path), "--quiet"]  # fmt: skip
+    script = REPO / "studies" / "girder_pinns.py"
+    r = subprocess.run(
+        [sys.executable, str(script), *args], capture_output=True, text=True, cwd=REPO
+    )
+    assert r.returncode == 0, r.stderr[-3000:]
+    path = tmp_path / "girder_pinns" / "g-deflection-snr30.json"
+    doc = json.loads(path.read_text())
+    ms = doc["summary"]["methods"]
+    assert set(ms) == {"modal_mcmc", "ensemble", "bpinn"}
+    for k in ms:
+        assert set(ms[k]["coverage"]) == {"EI", "EI_segments[0]", "EI_segments[1]"}
+        assert len(ms[k]["sd_ratio_median"]) == 2
+    assert ms["modal_mcmc"]["z_max_abs"] == [0.0, 0.0]
+    assert "B-PINN" in (tmp_path / "girder_pinns.md").read_text()
+    before = [x["time_s"] for x in doc["records"]]
+    r = subprocess.run(
+        [sys.executable, str(script), *args], capture_output=True, text=True, cwd=REPO
+    )
+    assert r.returncode == 0
+    assert [x["time_s"] for x in json.loads(path.read_text())["records"]] == before

@@ -157,7 +157,7 @@ def test_backed_reads_precision_and_percentages():
 
 
 # ------------------------------------------------------------------------------------------ pages
-PAGES = ("coverage", "table4", "table5", "table6", "family", "girders", "fitcheck")
+PAGES = ("coverage", "table4", "table5", "table6", "family", "girders", "girder_pinns", "fitcheck")
 
 
 @pytest.fixture(scope="module")

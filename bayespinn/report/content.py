@@ -523,6 +523,8 @@ def diagnostics_section(summary: dict) -> list[Block]:
     for key, m in summary["methods"].items():
         if m.get("variant"):
             out.append(Paragraph(f"{name(key)} variant: {m['variant']}."))
+        if m.get("network"):  # the PINN on a real girder (`uq.girder_pinn`)
+            out.append(Paragraph(f"{name(key)} network: {m['network']}."))
     return out
 
 
