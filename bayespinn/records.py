@@ -2,7 +2,7 @@
 
 A record is fresh when the code versions in its manifest are today's (`codeversion`). When the code
 has changed in a way that should not touch the numbers (a refactor), the record's command is run again
-with today's code and the two summaries are compared exactly (`replay_certificate`): an identical replay,
+with today's code and the two summaries are compared (numbers to 1e-12 relative: `REPLAY_RTOL`) (`replay_certificate`): an identical replay,
 kept beside the record as `replay.json`, vouches for it (`run_freshness`). Timings are not compared (a
 machine's load changes them); the record's own timings stay the measured ones.
 """
@@ -14,9 +14,26 @@ from pathlib import Path
 
 from .errors import InputError
 
-#: what a replay compares in each method's summary entry, exactly
+#: what a replay compares in each method's summary entry
 COMPARED = ("EI", "sigma")
 REPLAY = "replay.json"
+#: relative difference within which a replayed number counts as the same: a replay under another thread
+#: count reorders floating-point sums (the reference's sigma on the Exeter girder at 20 dB came out different
+#: in its 16th digit on one core), while every figure a record shows has at most 6 digits
+REPLAY_RTOL = 1e-12
+
+
+def _close(a, b, rtol: float = REPLAY_RTOL) -> bool:
+    """a and b equal, numbers within rtol relative (recursively through dicts and lists)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(_close(a[k], b[k], rtol) for k in a)
+    if isinstance(a, list | tuple) and isinstance(b, list | tuple):
+        return len(a) == len(b) and all(_close(x, y, rtol) for x, y in zip(a, b, strict=True))
+    if isinstance(a, bool) or isinstance(b, bool):
+        return a == b
+    if isinstance(a, int | float) and isinstance(b, int | float):
+        return a == b or abs(a - b) <= rtol * max(abs(a), abs(b))
+    return a == b
 
 
 def _load(folder: Path, name: str) -> dict:
@@ -66,8 +83,9 @@ def replay_certificate(record: str | Path, rerun: str | Path) -> dict:
     """Compare a record with a run of the same command by today's code (`rerun`, a run folder).
 
     InputError when the rerun is not today's code or not the record's command. Returns the certificate:
-    the record's and today's code versions, the command, the fields compared, `identical` and every
-    difference, and the rerun's timings and machine (for the reader, not compared)."""
+    the record's and today's code versions, the command, the fields compared, `identical` (every number
+    within `REPLAY_RTOL`, everything else equal), `bit_identical`, every difference beyond the tolerance,
+    and the rerun's timings and machine (for the reader, not compared)."""
     rec_s, rec_m = _load(record, "summary.json"), _load(record, "manifest.json")
     new_s, new_m = _load(rerun, "summary.json"), _load(rerun, "manifest.json")
     today = today_versions(rec_m.get("code_versions") or rec_s.get("methods", {}))
@@ -82,15 +100,19 @@ def replay_certificate(record: str | Path, rerun: str | Path) -> dict:
             f"a run of the record's command {' '.join(rec_m.get('command', []))}",
         )
     diffs: dict = {}
+    exact = True
     for k, entry in rec_s.get("methods", {}).items():
         other = new_s.get("methods", {}).get(k, {})
-        for f in COMPARED:
-            if entry.get(f) != other.get(f):
-                diffs.setdefault(k, {})[f] = [entry.get(f), other.get(f)]
-        a, b = _untimed(entry.get("diagnostics")), _untimed(other.get("diagnostics"))
-        if a != b:
-            diffs.setdefault(k, {})["diagnostics"] = [a, b]
-    if rec_s.get("agreement") != new_s.get("agreement"):
+        pairs = [(f, entry.get(f), other.get(f)) for f in COMPARED]
+        pairs.append(
+            ("diagnostics", _untimed(entry.get("diagnostics")), _untimed(other.get("diagnostics")))
+        )
+        for f, a, b in pairs:
+            exact = exact and a == b
+            if not _close(a, b):
+                diffs.setdefault(k, {})[f] = [a, b]
+    exact = exact and rec_s.get("agreement") == new_s.get("agreement")
+    if not _close(rec_s.get("agreement"), new_s.get("agreement")):
         diffs["agreement"] = [rec_s.get("agreement"), new_s.get("agreement")]
     return {
         "schema": "bayespinn.run.replay/1",
@@ -100,6 +122,8 @@ def replay_certificate(record: str | Path, rerun: str | Path) -> dict:
         "compared": [f"methods.*.{f}" for f in COMPARED]
         + ["methods.*.diagnostics (but times)", "agreement"],
         "identical": not diffs,
+        "bit_identical": exact,
+        "relative_tolerance": REPLAY_RTOL,
         "differences": diffs,
         "rerun_timings_s": new_m.get("timings_s"),
         "rerun_machine": new_m.get("machine"),

@@ -59,11 +59,21 @@ def test_an_identical_rerun_vouches_for_the_record(record, tmp_path):
 
 def test_a_changed_number_is_a_difference(record, tmp_path):
     other = copy.deepcopy(SUMMARY)
-    other["methods"]["modal_mcmc"]["EI"]["sd"] *= 1 + 1e-12
+    other["methods"]["modal_mcmc"]["EI"]["sd"] *= 1 + 1e-9
     cert = replay_certificate(record, rerun(tmp_path, other))
     assert not cert["identical"] and list(cert["differences"]["modal_mcmc"]) == ["EI"]
+    assert not cert["bit_identical"]
     (record / REPLAY).write_text(json.dumps(cert), encoding="utf-8")
     assert run_freshness(record)[0] is False
+
+
+def test_a_reordered_sum_is_the_same_number_but_not_the_same_bits(record, tmp_path):
+    """Another thread count reorders floating-point sums: a last-digit change (1e-15 relative) is within
+    `REPLAY_RTOL`, so the replay vouches for the record, and the certificate says it was not bit-identical."""
+    other = copy.deepcopy(SUMMARY)
+    other["methods"]["modal_mcmc"]["sigma"]["mean"] *= 1 + 1e-15
+    cert = replay_certificate(record, rerun(tmp_path, other))
+    assert cert["identical"] and not cert["bit_identical"] and not cert["differences"]
 
 
 def test_another_command_or_older_code_is_refused(record, tmp_path):
