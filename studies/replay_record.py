@@ -52,6 +52,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument(
         "--rerun", type=Path, default=None, help="a run folder of the same command already made"
     )
+    p.add_argument(
+        "--keep",
+        type=Path,
+        default=None,
+        help="keep each rerun in KEEP/<record name> (default: a temporary folder, removed)",
+    )
     p.add_argument("--quiet", action="store_true")
     args = p.parse_args(argv)
     c.setup_logging(args.quiet)
@@ -61,6 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     for record in args.records:
         if args.rerun is not None:
             cert = replay_certificate(record, args.rerun)
+        elif args.keep is not None:
+            run = args.keep / record.name
+            rerun(record, run)
+            cert = replay_certificate(record, run)
         else:
             with tempfile.TemporaryDirectory(prefix="replay-") as tmp:
                 rerun(record, Path(tmp) / "run")

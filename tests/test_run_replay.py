@@ -74,6 +74,17 @@ def test_a_reordered_sum_is_the_same_number_but_not_the_same_bits(record, tmp_pa
     other["methods"]["modal_mcmc"]["sigma"]["mean"] *= 1 + 1e-15
     cert = replay_certificate(record, rerun(tmp_path, other))
     assert cert["identical"] and not cert["bit_identical"] and not cert["differences"]
+    # an error estimate in nats is compared absolutely (`NATS_ATOL`), any other number relatively
+    today = today_versions(["modal_mcmc"])
+
+    def with_nats(name, v):
+        d = copy.deepcopy(SUMMARY)
+        d["methods"]["modal_mcmc"]["diagnostics"]["check_nats"] = v
+        return folder(tmp_path / name, d, [*COMMAND, "--out", name], today)
+
+    base = with_nats("r0", 3.9e-4)
+    assert replay_certificate(base, with_nats("r1", 3.9e-4 + 2.2e-14))["identical"]
+    assert not replay_certificate(base, with_nats("r2", 3.9e-4 + 1e-6))["identical"]
 
 
 def test_another_command_or_older_code_is_refused(record, tmp_path):
