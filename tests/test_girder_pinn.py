@@ -188,13 +188,13 @@ def test_pinn_methods_match_the_reference_on_a_damaged_girder(damaged, reference
     assert np.any(np.abs(z) > 1.5), z
 
 
-def test_cli_runs_the_pinn_methods_on_a_girder_with_springs(tmp_path):
+def test_cli_runs_the_pinn_methods_on_a_girder_with_springs_and_an_uncertain_load(tmp_path):
     """`bayespinn run --method ensemble,bpinn` with springs inferred: summary keys of the contract
     (rotational_stiffness [left, right], EI_segments with p_damaged), fit checks, report written."""
     cfg = tmp_path / "g.toml"
     cfg.write_text(
         '[beam]\nrotational_stiffness = [1.2e8, 1.2e8]\n[model]\nsupports = "springs"\n'
-        "[data]\nn_points = 60\n"
+        "[vehicle]\nload_rel_sd = 0.05\n[data]\nn_points = 60\n"
     )
     out = tmp_path / "run"
     r = _cli(
@@ -209,9 +209,10 @@ def test_cli_runs_the_pinn_methods_on_a_girder_with_springs(tmp_path):
         assert m["load_factor"]["ci90"][0] < 1.0 + 0.2 and m["load_factor"]["ci90"][1] > 1.0 - 0.2
         assert m["fit_check"]["verdict"] in ("fits", "misfit")
         assert m["EI"]["ci90"][0] < m["EI"]["ci90"][1]
-    assert "B-PINN network: 2 x 16 tanh, enriched with the girder's FE modal response" in (
-        out / "report.md"
-    ).read_text()
+    assert (
+        "B-PINN network: 2 x 16 tanh, enriched with the girder's FE modal response"
+        in (out / "report.md").read_text()
+    )
 
 
 def test_pinn_coverage_study_runs_every_method_on_the_reference_datasets(tmp_path):
