@@ -480,12 +480,7 @@ def girder_ensemble_posterior(
         "converged": bool(ratio <= MAX_SCATTER_RATIO and min_ess >= ESS_MIN),
         "scheme": "each member's last-layer posterior by adaptive importance sampling; members pooled",
     }
-    span = problem.S / np.sum(1.0 / np.exp(th[..., : problem.S]), axis=-1)  # (member, draw)
-    info = _info(problem, settings, None) | {
-        "members": members,
-        "member_EI": span.mean(1).tolist(),
-        "member_details": member_info,
-    }
+    info = _info(problem, settings, None) | {"members": member_info}
     return _posterior(
         problem,
         th[..., :-1].reshape(1, -1, problem.dim),
