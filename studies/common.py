@@ -358,6 +358,24 @@ def key_of(method: str) -> str:
 
 
 # ------------------------------------------------------------------------------ replicate studies
+def open_study(path: Path, schema: str, fingerprint: str, today: str) -> dict:
+    """The study file at `path` to resume (a fresh one when it is missing or another study's), keeping only
+    the replicates computed by code `today` (the others are run again, with a warning)."""
+    doc = {}
+    if path.is_file():
+        doc = json.loads(path.read_text(encoding="utf-8"))
+        if doc.get("schema") != schema or doc.get("fingerprint") != fingerprint:
+            log.warning("warning: %s is another study: starting afresh", path)
+            doc = {}
+    if not doc:
+        doc = {"schema": schema, "fingerprint": fingerprint, "records": []}
+    kept = [r for r in doc["records"] if r.get("code_version") == today]
+    if len(kept) < len(doc["records"]):
+        log.warning("%d replicates by other code are run again", len(doc["records"]) - len(kept))
+    doc["records"] = kept
+    return doc
+
+
 def run_replicates(doc: dict, path: Path, n: int, compute, summarise, tag: str) -> dict:
     """Compute replicates 0..n-1 not yet in doc["records"] (`compute(i)` returns one record with its
     "index"), rewriting the study file atomically after each so an interruption loses at most the replicate

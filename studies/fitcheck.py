@@ -158,18 +158,7 @@ def run_study(args, argv, levels) -> dict:
     ).hexdigest()[:16]
     config = Path(args.config) if args.config else None
     path = Path(args.out) / "fitcheck" / f"{study_name(config, args.case, levels)}.json"
-    doc = {}
-    if path.is_file():
-        doc = json.loads(path.read_text(encoding="utf-8"))
-        if doc.get("schema") != STUDY_SCHEMA or doc.get("fingerprint") != key:
-            log.warning("warning: %s is another study: starting afresh", path)
-            doc = {}
-    if not doc:
-        doc = {"schema": STUDY_SCHEMA, "fingerprint": key, "records": []}
-    today = code_version()
-    kept = [r for r in doc["records"] if r.get("code_version") == today]
-    if len(kept) < len(doc["records"]):
-        log.warning("%d replicates by other code are run again", len(doc["records"]) - len(kept))
+    doc = c.open_study(path, STUDY_SCHEMA, key, code_version())
     doc.update(
         config=str(config) if config else None,
         config_values=c.jsonable(cfg.to_dict()),
@@ -178,7 +167,6 @@ def run_study(args, argv, levels) -> dict:
         seed=args.seed,
         expect=args.expect,
         level=LEVEL,
-        records=kept,
         provenance=c.provenance(__file__, argv, args, methods=["modal_mcmc"]),
     )
     opts = c.run_options(args)

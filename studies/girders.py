@@ -150,18 +150,7 @@ def run_study(args, argv, snr) -> dict:
         ).encode()
     ).hexdigest()[:16]
     path = study_path(Path(args.out), Path(args.config), args.case, snr)
-    doc = {}
-    if path.is_file():
-        doc = json.loads(path.read_text(encoding="utf-8"))
-        if doc.get("schema") != STUDY_SCHEMA or doc.get("fingerprint") != key:
-            log.warning("warning: %s is another study: starting afresh", path)
-            doc = {}
-    if not doc:
-        doc = {"schema": STUDY_SCHEMA, "fingerprint": key, "records": []}
-    today = c.code_versions(["modal_mcmc"])["modal_mcmc"]
-    kept = [r for r in doc["records"] if r.get("code_version") == today]
-    if len(kept) < len(doc["records"]):
-        log.warning("%d replicates by other code are run again", len(doc["records"]) - len(kept))
+    doc = c.open_study(path, STUDY_SCHEMA, key, c.code_versions(["modal_mcmc"])["modal_mcmc"])
     doc.update(
         config=str(args.config),
         config_values=c.jsonable(cfg.to_dict()),
@@ -169,7 +158,6 @@ def run_study(args, argv, snr) -> dict:
         snr_db=snr,
         seed=args.seed,
         level=LEVEL,
-        records=kept,
         provenance=c.provenance(__file__, argv, args, methods=["modal_mcmc"]),
     )
     opts = c.run_options(args, snr)
