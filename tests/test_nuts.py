@@ -174,3 +174,33 @@ def test_a_struggling_bpinn_says_so_in_summary_and_report(struggling_run):
     report = (struggling_run / "report.md").read_text()
     assert "did not meet its convergence criteria" in report
     assert "divergent transitions" in report or "maximum tree depth" in report
+
+
+class _CorrelatedGauss:
+    """A picklable potential of z (the last-layer B-PINN's interface): a correlated 2-D Gaussian."""
+
+    def __call__(self, params):
+        z = params["z"]
+        return 0.5 * (z[0] ** 2 + (z[1] - 0.8 * z[0]) ** 2 / 0.36)
+
+
+def test_bpinn_chains_are_the_same_wherever_they_run():
+    """The B-PINN's chains run as executor tasks: one worker or two, the draws are identical bit for bit
+    (each chain is a function of its own seed); another seed gives other draws (negative control)."""
+    from bayespinn.executor import Executor
+    from bayespinn.uq.bpinn import nuts
+    from bayespinn.uq.nuts import NUTSSettings
+
+    s = NUTSSettings(chains=3, warmup=40, samples=40)
+    z_map, L = np.zeros(2), np.array([[1.0, 0.0], [0.8, 0.6]])
+
+    def draws(seed, workers):
+        d, runs = nuts(
+            _CorrelatedGauss(), z_map, L, s, _seed(seed), False, Executor(workers=workers)
+        )
+        assert len(runs) == s.chains and d.shape == (s.chains, s.samples, 2)
+        return d
+
+    one, two = draws(0, 1), draws(0, 2)
+    np.testing.assert_array_equal(one, two)
+    assert not np.array_equal(one, draws(1, 1))

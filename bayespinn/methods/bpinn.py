@@ -71,7 +71,11 @@ class BPINN(Method):
             progress=self.progress,
             # the deep ensemble's member 0 fit on the same data (`uq.shared_fit`)
             fit_seed=member_seed(ensemble_seed(seed)),
+            **self._sampler_options(),
         )
+
+    def _sampler_options(self) -> dict:
+        return {}
 
 
 class LastLayerBPINN(BPINN):
@@ -111,6 +115,10 @@ class LastLayerBPINN(BPINN):
         from ..uq.bpinn import lastlayer_posterior
 
         return lastlayer_posterior
+
+    def _sampler_options(self) -> dict:
+        # its chains run as tasks of the run's executor (one process per core by default)
+        return {"executor": self.executor}
 
 
 class FullWeightBPINN(BPINN):

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import torch
@@ -44,35 +45,61 @@ log = logging.getLogger(__name__)
 VARIANT = "last-layer B-PINN (output weights marginalised analytically; NUTS on log EI, log sigma)"
 
 
+@dataclass(frozen=True)
+class _Chain:
+    """One NUTS chain of `nuts`, an executor task: its result is a function of (pot, z_map, L, s, seed, c)."""
+
+    pot: LastLayerPotential
+    z_map: np.ndarray
+    L: np.ndarray
+    s: NUTSSettings
+    seed: object
+    c: int
+    progress: bool = False
+
+
+def _run_chain(t: _Chain):
+    """(z draws (draw, dim), the chain's run) of chain t.c, from a dispersed start (2 Laplace sds around the
+    MAP, `valid_start`) on its own seed."""
+    wpot = Whitened(t.pot, t.z_map, t.L)
+    cs = seeding.child(t.seed, "pyro", t.c)
+    u0 = valid_start(
+        wpot,
+        torch.tensor(np.random.default_rng(cs).standard_normal(len(t.z_map)), dtype=torch.float64),
+    )
+    run = run_nuts(
+        wpot,
+        {"u": u0},
+        warmup=t.s.warmup,
+        samples=t.s.samples,
+        seed=cs,
+        full_mass=True,
+        max_tree_depth=t.s.max_tree_depth,
+        progress=t.progress,
+    )
+    return wpot.z_draws(run.samples["u"]), run
+
+
 def nuts(
-    pot: LastLayerPotential, z_map: np.ndarray, L: np.ndarray, s: NUTSSettings, seed, progress: bool
+    pot: LastLayerPotential,
+    z_map: np.ndarray,
+    L: np.ndarray,
+    s: NUTSSettings,
+    seed,
+    progress: bool,
+    executor=None,
 ):
-    """Run `s.chains` NUTS chains (one after another, each on its own seed) on the whitened potential, each
-    from a dispersed start (2 Laplace sds around the MAP); draws of z (chain, draw, 2, or 3 with AR(1) noise)
-    and the chains' runs (sample statistics, warnings)."""
-    wpot = Whitened(pot, z_map, L)
-    out, runs = [], []
-    for c in range(s.chains):
-        cs = seeding.child(seed, "pyro", c)
-        u0 = valid_start(
-            wpot,
-            torch.tensor(
-                np.random.default_rng(cs).standard_normal(len(z_map)), dtype=torch.float64
-            ),
-        )
-        run = run_nuts(
-            wpot,
-            {"u": u0},
-            warmup=s.warmup,
-            samples=s.samples,
-            seed=cs,
-            full_mass=True,
-            max_tree_depth=s.max_tree_depth,
-            progress=progress,
-        )
-        out.append(wpot.z_draws(run.samples["u"]))
-        runs.append(run)
-    return np.stack(out), runs
+    """Run `s.chains` NUTS chains on the whitened potential, each from a dispersed start on its own seed, as
+    tasks of `executor` (default: the local pool, one process per core; each chain runs single-threaded
+    wherever it runs, so the draws do not depend on the executor); draws of z (chain, draw, 2, or 3 with
+    AR(1) noise) and the chains' runs (sample statistics, warnings)."""
+    from ..executor import Executor, task_resources
+
+    tasks = [_Chain(pot, z_map, L, s, seed, c) for c in range(s.chains)]
+    res = (executor or Executor()).map(
+        _run_chain, tasks, desc="B-PINN chains", progress=progress, resources=task_resources("cpu")
+    )
+    return np.stack([d for d, _ in res]), [r for _, r in res]
 
 
 def lastlayer_posterior(
@@ -85,9 +112,11 @@ def lastlayer_posterior(
     noise: NoisePrior,
     progress: bool = False,
     fit_seed=None,
+    executor=None,
 ) -> Posterior:
     """Fit a PINN, then sample the last-layer B-PINN posterior of (EI, sigma) with NUTS; with `[model] noise =
-    "ar1"` the noise is AR(1) along each sensor's series and its coefficient is sampled too."""
+    "ar1"` the noise is AR(1) along each sensor's series and its coefficient is sampled too. The chains are
+    tasks of `executor` (`nuts`)."""
     t0 = time.perf_counter()
     if len(data) == 0:
         return no_data(cfg, seed, t0)
@@ -98,7 +127,18 @@ def lastlayer_posterior(
     shift = log_shift(res, problem)
     with torch_threads(1):  # tiny linear algebra (see `threads`)
         draws, diag, pred, stats = _sample_last_layer(
-            res, problem, data, seed, profile, progress, noise, settings, ei_prior, shift, cfg
+            res,
+            problem,
+            data,
+            seed,
+            profile,
+            progress,
+            noise,
+            settings,
+            ei_prior,
+            shift,
+            cfg,
+            executor,
         )
     return assemble(
         draws,
@@ -116,7 +156,18 @@ def lastlayer_posterior(
 
 
 def _sample_last_layer(
-    res, problem, data, seed, profile, progress, noise, settings, ei_prior, shift, cfg
+    res,
+    problem,
+    data,
+    seed,
+    profile,
+    progress,
+    noise,
+    settings,
+    ei_prior,
+    shift,
+    cfg,
+    executor=None,
 ):
     """NUTS on (log theta, log sigma[, atanh rho]) of the last-layer model: z draws (chain, draw, 2 or 3),
     diagnostics, predictor and the chains' sample statistics."""
@@ -126,7 +177,7 @@ def _sample_last_layer(
     )
     log.info("[bpinn] NUTS: %s", VARIANT)
     s = NUTSSettings.for_profile(profile)
-    draws, runs = nuts(pot, z_map, L, s, seed, progress)
+    draws, runs = nuts(pot, z_map, L, s, seed, progress, executor)
     diag = {
         "chains": s.chains,
         "warmup": s.warmup,
