@@ -45,9 +45,43 @@ def bench_modal(
     return out
 
 
-def bench(device: str = "cpu", progress: bool = True) -> dict:
+#: the run that `bench --run` times: the README's quick start (`bayespinn run --snr 10`, seed 0)
+QUICK_START = {"case": "deflection", "snr_db": 10.0, "seed": 0, "methods": "all", "profile": "fast"}
+
+
+def bench_run(device: str = "cpu", progress: bool = True, profile: str | None = None) -> dict:
+    """Where the time of the quick start's analysis goes: `QUICK_START` run in memory (no files), its wall time
+    and each method's share (`pipeline.time_breakdown`: training, summed over worker processes where they
+    run in parallel, and the rest). ``profile`` overrides the quick start's (tests use 'smoke')."""
+    from .options import RunOptions
+    from .pipeline import analyse, load_data
+
+    q = {**QUICK_START, **({"profile": profile} if profile else {})}
+    cfg = preset(q["case"])
+    t0 = time.perf_counter()
+    data, truth = load_data(cfg, None, q["snr_db"], q["seed"])
+    opts = RunOptions(profile=q["profile"], device=device, snr_db=q["snr_db"], progress=progress)
+    res = analyse(
+        data,
+        cfg,
+        methods=q["methods"],
+        seed=q["seed"],
+        snr_db=q["snr_db"],
+        truth=truth,
+        opts=opts,
+    )
+    return {
+        **q,
+        "wall_s": time.perf_counter() - t0,
+        "time_breakdown_s": res.manifest.get("time_breakdown_s"),
+        "timings_s": res.manifest.get("timings_s"),
+    }
+
+
+def bench(device: str = "cpu", progress: bool = True, run: bool = False) -> dict:
     """All sections: derivatives (Taylor vs nested autograd), ensemble (one after another vs batched vs parallel
-    processes), many networks trained as one, modal."""
+    processes), many networks trained as one, modal; with ``run`` also the quick start's breakdown
+    (`bench_run`, minutes)."""
     import torch
 
     from .pinn.bench import bench_derivatives, bench_ensemble, bench_many_networks
@@ -62,4 +96,7 @@ def bench(device: str = "cpu", progress: bool = True) -> dict:
     res["many_networks"] = bench_many_networks(device=device)
     log.info("bench: modal likelihood ...")
     res["modal"] = bench_modal()
+    if run:
+        log.info("bench: the quick start's analysis (bayespinn run --snr 10), minutes ...")
+        res["run"] = bench_run(device=device, progress=progress)
     return res

@@ -102,6 +102,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--device", default="auto")
     b.add_argument("--quiet", action="store_true")
     b.add_argument("--seed", type=int_at_least("--seed", 0), default=0)
+    b.add_argument(
+        "--run",
+        action="store_true",
+        help="also time the quick start's analysis (bayespinn run --snr 10) and break it down by method",
+    )
     return p
 
 

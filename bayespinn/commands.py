@@ -140,7 +140,7 @@ def cmd_bench(args) -> int:
     from .uq.posterior import jsonable
 
     device = resolve_device(args.device)
-    res = bench(device=device, progress=not args.quiet)
+    res = bench(device=device, progress=not args.quiet, run=args.run)
     text = json.dumps(jsonable(res), indent=2) + "\n"
     if args.out:
         atomic_write_text(args.out, text)

@@ -335,3 +335,15 @@ def test_coverage_datasets_are_independent_across_snr_and_shared_across_methods(
     again = simulate(cfg, 10.0, replicate_seed(0, 10.0, 5))
     np.testing.assert_array_equal(a.value, again.value)
     assert not np.allclose(simulate(cfg, 10.0, replicate_seed(0, 10.0, 6)).x, a.x)
+
+
+def test_bench_run_breaks_the_quick_start_down_by_method():
+    """`bench --run`: the quick start's analysis (here at the smoke profile), its wall time and each method's
+    share; the shares cannot exceed the wall time."""
+    from bayespinn.bench import bench_run
+
+    r = bench_run(device="cpu", progress=False, profile="smoke")
+    assert r["profile"] == "smoke" and r["snr_db"] == 10.0 and r["seed"] == 0
+    assert set(r["time_breakdown_s"]) == {"modal_mcmc", "ensemble", "bpinn"}
+    walls = [v["wall"] for v in r["time_breakdown_s"].values()]
+    assert all(w > 0 for w in walls) and sum(walls) <= r["wall_s"]
