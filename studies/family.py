@@ -200,7 +200,8 @@ def summarise(doc: dict) -> dict:
     tr = doc.get("time_reference")
     times = [r["time_s"] for r in doc["records"]]
     timing = {"max_s": max(times), "median_s": sorted(times)[len(times) // 2]}
-    if tr:
+    # the yardstick counts only when the code that timed it computed the bridges (else it is another code's)
+    if tr and all(r["code_versions"] == tr.get("code_versions") for r in doc["records"]):
         timing["reference_s"] = tr["time_s"]
         timing["max_ratio"] = max(times) / tr["time_s"]
         timing["within"] = timing["max_ratio"] <= TIME_RATIO_MAX
