@@ -208,3 +208,34 @@ def test_full_family_study_meets_the_bands(tmp_path, case, snr, bridges):
     for k in ("ensemble", "bpinn"):
         assert crit[k]["bridges"] == bridges
         assert all(crit[k]["pass"].values()), (k, crit[k])
+
+
+def test_the_timing_yardstick_counts_only_for_the_code_that_computed_the_bridges():
+    """The page compares each bridge's time with the Exeter 20 dB run timed in the same study, and only when
+    that run and the bridges come from the same code; a yardstick of other code is left out."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("family_script", REPO / "studies" / "family.py")
+    script = importlib.util.module_from_spec(spec)
+    sys.path.insert(0, str(REPO / "studies"))  # it imports its neighbour `common`
+    try:
+        spec.loader.exec_module(script)
+    finally:
+        sys.path.remove(str(REPO / "studies"))
+    q = {"z": 0.1, "sd_ratio": 1.0, "sigma_z": 0.0}
+    today = {"modal_mcmc": "a", "ensemble": "b", "bpinn": "c"}
+    recs = [
+        {
+            "bridge": {"alpha": a},
+            "time_s": t,
+            "code_versions": today,
+            "methods": {"modal_mcmc": {}, "ensemble": q, "bpinn": q},
+        }
+        for a, t in ((0.02, 100.0), (0.08, 300.0))
+    ]
+    doc = {"reference": "modal_mcmc", "methods": list(today), "records": recs}
+    same = script.summarise({**doc, "time_reference": {"time_s": 200.0, "code_versions": today}})
+    assert same["timing"]["max_ratio"] == pytest.approx(1.5) and same["timing"]["within"]
+    other = {**today, "ensemble": "older"}
+    old = script.summarise({**doc, "time_reference": {"time_s": 200.0, "code_versions": other}})
+    assert "reference_s" not in old["timing"] and "max_ratio" not in old["timing"]
