@@ -422,38 +422,87 @@ def test_ensemble_without_data_is_not_identified():
     assert s["identified"] is False and "not identified" in s["note"]
 
 
-def test_ensemble_pooling_skips_members_without_a_local_width():
+def _gaussian_marginal(mean, sd, points=801, half=8.0):
+    from bayespinn.uq.ensemble import MemberMarginal
+
+    g = mean + np.linspace(-half * sd, half * sd, points)
+    p = np.exp(-0.5 * ((g - mean) / sd) ** 2)
+    return MemberMarginal(g, p / p.sum())
+
+
+def test_ensemble_pools_its_members_posteriors_as_a_mixture():
     from bayespinn.uq.ensemble import pool_log_ei
 
-    # members' log EI around 0 with deviations 0, +-0.02, +-0.01: sum of squares 0.001 over 4 dof -> 2.5e-4;
-    # every member's local sd 0.01 -> variance 1e-4; ensemble 1e-4 + 2.5e-4 / 5 = 1.5e-4
-    log_ei = np.array([0.0, 0.02, -0.02, 0.01, -0.01]) + np.log(1.03e9)
-    lap = np.full(5, 0.01)
-    between, lap_var, n_ok, pooled = pool_log_ei(log_ei, lap, 0.5)
+    # members' posterior means 0, +-0.02, +-0.01 around log(1.03e9): variance of the means 2e-4 (ddof 0);
+    # every member's width 0.01 -> 1e-4; the mixture's variance 1e-4 + 2e-4 = 3e-4
+    c = np.log(1.03e9)
+    means = np.array([0.0, 0.02, -0.02, 0.01, -0.01]) + c
+    marg = [_gaussian_marginal(m, 0.01) for m in means]
+    fits = means + np.array([0.3, -0.1, 0.2, 0.0, 0.1])  # the trained EIs: not the centre
+    mu, between, lap_var, n_ok, pooled = pool_log_ei(fits, marg, 0.5)
     np.testing.assert_allclose(
-        [between, lap_var, n_ok, pooled], [2.5e-4, 1e-4, 5, 1.5e-4], rtol=1e-9
+        [mu, between, lap_var, n_ok, pooled], [c, 2e-4, 1e-4, 5, 3e-4], rtol=1e-6
     )
-    # member 4 without a peak: the local term rests on the other four
-    lap_nan = lap.copy()
-    lap_nan[4] = np.nan
-    _, lv, n2, pooled2 = pool_log_ei(log_ei, lap_nan, 0.5)
-    np.testing.assert_allclose([lv, n2, pooled2], [1e-4, 4, 1.5e-4], rtol=1e-9)
-    # negative control: the old rule (such a member at the prior's sd) blows the interval up ~10x
-    lap_prior = lap.copy()
-    lap_prior[4] = 0.5
-    assert np.sqrt(pool_log_ei(log_ei, lap_prior, 0.5)[3]) > 5 * np.sqrt(pooled2)
-    # no width at all: the spread stands for the posterior, plus the mean's error
-    assert pool_log_ei(log_ei, np.full(5, np.nan), 0.5)[3] == pytest.approx(2.5e-4 * 1.2)
-    # one member without a width and no spread: the prior
-    assert pool_log_ei(log_ei[:1], [np.nan], 0.5)[3] == 0.25
+    # member 4 without a marginal: the mixture of the other four
+    mu4, b4, lv4, n4, pooled4 = pool_log_ei(fits, [*marg[:4], None], 0.5)
+    rest = means[:4]
+    np.testing.assert_allclose(
+        [mu4, b4, lv4, n4, pooled4],
+        [rest.mean(), rest.var(), 1e-4, 4, 1e-4 + rest.var()],
+        rtol=1e-6,
+    )
+    # no marginal at all: the trained EIs' spread stands for the posterior, plus their mean's error
+    mu0, _, _, n0, pooled0 = pool_log_ei(fits, [None] * 5, 0.5)
+    assert n0 == 0 and mu0 == pytest.approx(fits.mean())
+    assert pooled0 == pytest.approx(np.var(fits, ddof=1) * 1.2)
+    # one member without a marginal: the prior
+    assert pool_log_ei(fits[:1], [None], 0.5)[4] == 0.25
 
 
-def test_ensemble_interval_is_calibrated_when_members_are_posterior_draws():
-    """The property the ensemble variance rests on: members that are posterior draws (N(m, s^2) around the
-    posterior mean m, each with local width s) and a truth drawn from the same posterior: the 90 % interval
-    mean +- 1.645 sqrt(variance) holds the truth inside the binomial 99.9 % region over 4000 trials. The
-    negative control, the local width alone (without the Monte Carlo error of the members' mean), falls
-    outside it: it under-covers."""
+class _GaussianLastLayer:
+    """A stand-in last-layer model whose marginal of log theta is N(c, s^2) and whose trained theta sits
+    `off` widths away from c (as a member's trained EI can)."""
+
+    def __init__(self, c, s, off):
+        self.c, self.s, self.theta_fit = c, s, float(np.exp(c + off * s))
+
+    def log_marginal(self, log_theta, log_sigma, z=None):
+        return -0.5 * ((log_theta - self.c) / self.s) ** 2
+
+
+def test_a_members_marginal_follows_its_peak_away_from_the_trained_value():
+    """The grid starts at the trained EI, seven widths from the marginal's peak, and has to find it: the
+    member's posterior is then centred where its marginal is (shifted to EI units, the prior's pull
+    negligible), with its width. The control, a grid that may not move, never sees the peak's far side."""
+    from bayespinn.uq import ensemble as E
+    from bayespinn.uq.priors import EIPrior
+
+    c, s, shift = -0.1, 0.003, np.log(2.0e9)
+    ll = _GaussianLastLayer(c, s, off=7.0)
+    grid = E.SigmaGrid(np.array([-3.0, -2.0]), np.array([0.5, 0.5]))
+    prior = EIPrior(median=2.0e9, log_sd=0.5)
+    m = E.member_marginal(ll, grid, prior, shift, sd=s)
+    assert m is not None
+    assert m.mean == pytest.approx(c + shift, abs=0.02 * s)
+    assert np.sqrt(m.var) == pytest.approx(s, rel=0.02)
+    assert E.member_marginal(ll, grid, prior, shift, sd=float("nan")) is None
+    tries = E.MARGINAL_TRIES
+    try:
+        E.MARGINAL_TRIES = 1
+        m1 = E.member_marginal(ll, grid, prior, shift, sd=s / 4)
+    finally:
+        E.MARGINAL_TRIES = tries
+    assert m1 is None
+
+
+def test_ensemble_mixture_is_calibrated_when_members_hold_the_posterior():
+    """The property the mixture rests on: members whose marginals are the posterior N(m, s^2) (up to a
+    small scatter between networks) and a truth drawn from that posterior: the mixture's 90 % interval
+    holds the truth inside the binomial 99.9 % region over 4000 trials. The negative control, the old
+    centre (five randomise-then-optimise draws around m, the local width plus their mean's Monte Carlo
+    error) is calibrated too when the draws are exact, so the control here is what broke on the family:
+    trained EIs that miss the posterior by a bias of one local width; centred on them, the interval falls
+    outside the region, while the mixture of the same members' marginals does not care."""
     from scipy import stats
 
     from bayespinn.uq.ensemble import pool_log_ei
@@ -464,11 +513,15 @@ def test_ensemble_interval_is_calibrated_when_members_are_posterior_draws():
     hits, hits_ctrl = 0, 0
     for _ in range(n):
         truth = s * rng.standard_normal()  # the truth around the posterior mean 0
-        members = s * rng.standard_normal(M)
-        _, lap_var, _, var = pool_log_ei(members, np.full(M, s), 0.5)
-        mu = members.mean()
+        centres = (
+            0.1 * s * rng.standard_normal(M)
+        )  # each network's posterior mean, scattered a little
+        marg = [_gaussian_marginal(m, s, points=161) for m in centres]
+        fits = s + s * rng.standard_normal(M)  # trained EIs: biased by one width
+        mu, _, _, _, var = pool_log_ei(fits, marg, 0.5)
         hits += abs(truth - mu) <= 1.645 * np.sqrt(var)
-        hits_ctrl += abs(truth - mu) <= 1.645 * np.sqrt(lap_var)
+        old_var = s**2 + np.var(fits, ddof=1) / M
+        hits_ctrl += abs(truth - fits.mean()) <= 1.645 * np.sqrt(old_var)
     assert lo <= hits <= hi, (hits, lo, hi)
     assert not lo <= hits_ctrl <= hi, (hits_ctrl, lo, hi)
 

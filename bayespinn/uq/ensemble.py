@@ -8,21 +8,21 @@ collocation stream) is trained in two phases through the one training loop:
    (y + sigma_hat eps_m) with its own perturbed prior anchor (log EI_0 + s eta_m), under the
    posterior-scaled objective. For a linear-Gaussian problem the fits are then exact posterior draws.
 
-Five draws estimate a spread to about +-35 %, so each member also reports its own local width of log
-EI, from the exact last-layer marginal likelihood of its trained features (`lastlayer`), as the sd of that
-marginal on a grid (`LastLayer.local_sd_log_theta`): the Laplace width where the marginal is Gaussian, and
-the true width where it is not. (The curvature alone under-stated it at 10 dB, where the first mode's
-frequency makes the marginal skewed: the quick start's members gave 1.8 % where the B-PINN's NUTS on the
-same kind of model gave 2.5 %, and the ensemble's sd came out 0.53x the reference's.)
-The ensemble's variance of log EI is the members' mean local variance, the posterior's, plus the Monte
-Carlo error of their mean: s_local^2 + S_between^2 / M. Randomise-then-optimise members are posterior draws
-in the linear-Gaussian case, so their mean misses the posterior mean by S_between / sqrt(M), and the
-truth - ensemble mean then has exactly that variance: the interval is calibrated (5 members: 1.1x the
-posterior sd). It does not lean on the between-member spread for the width itself: where the marginal is
-not Gaussian the members, warm-started in one basin of the frequency's likelihood, scatter far less than
-the posterior (the quick start at 10 dB: 0.9 % against local widths of 2.2-2.8 %), and averaging the two
-estimates (the earlier conjugate pooling) gave an sd 0.70x the reference's. Members that scatter more than
-their widths say are flagged (`MAX_SCATTER_RATIO`).
+Each member's EI comes from the exact last-layer marginal likelihood of its trained features on the
+measured data (`lastlayer`), times the EI prior, on a grid of log EI (`member_marginal`; sigma at its
+mode): the member's posterior of EI given its features, skewed where the data make it so (at 10 dB the
+first mode's frequency does). The ensemble's posterior is the equal mixture of the members' marginals (its
+draws come from them in equal shares): mean the mean of their means, variance their mean variance plus the
+variance of their means, the spread between networks (`pool_log_ei`).
+
+The trained EI itself is not the centre. Training minimises data misfit plus physics penalties of weight
+one, while the marginal weighs the physics at the pseudo-sd the network achieves, so the two optima differ;
+and randomise-then-optimise members are posterior draws only in the linear-Gaussian case. Measured on the
+family of bridges at 30 dB (issue 21), centring on the trained EIs (variance: local + between / M) put the
+ensemble's mean 0.74 reference sd from the reference's, bridge to bridge (sd of z over 24 bridges, largest
+2.46, where one bridge's five trained members sat at z = 0.0 to 7.1); the same members' marginal means sat
+within 0.35 sd of the reference's on that bridge (their mixture: z +0.13, sd 1.19x). Members whose
+marginals' means scatter more than their widths say are flagged (`MAX_SCATTER_RATIO`).
 
 The noise level comes from the same last-layer marginal likelihood, not from the trained network's raw
 residuals: with its physics penalties of weight one, a network of 5 x 64 neurons absorbs part of the
@@ -66,7 +66,13 @@ from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
 from ..threads import torch_threads
-from .lastlayer import IDENTIFIED_FRACTION, LastLayer, LastLayerPredictor, log_prior_z
+from .lastlayer import (
+    GRID_EDGE,
+    IDENTIFIED_FRACTION,
+    LastLayer,
+    LastLayerPredictor,
+    log_prior_z,
+)
 from .pinn_ar1 import AR1Posterior
 from .posterior import Posterior
 from .priors import EIPrior, NoisePrior, prior_only
@@ -212,28 +218,89 @@ def ar1_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
     return SigmaGrid(ls_ax, p / p.sum(), z_ax)
 
 
-def pool_log_ei(
-    log_ei_m: np.ndarray, lap_sd: np.ndarray, prior_log_sd: float
-) -> tuple[float, float, float, float]:
-    """(between-member variance, mean local variance, members with a local width, ensemble variance) of log EI.
+#: a member's marginal of log EI: grid points over +-MARGINAL_HALF_WIDTH local sds, re-centred on the peak
+#: and widened (x MARGINAL_WIDEN) up to MARGINAL_TRIES times until both ends hold less than GRID_EDGE of it
+MARGINAL_POINTS = 321
+MARGINAL_HALF_WIDTH = 8.0
+MARGINAL_WIDEN = 2.0
+MARGINAL_TRIES = 5
 
-    ensemble variance = local variance + between / M (module docstring). A member whose last-layer marginal
-    has no peak in EI at its own fit (nan) gives no width, and the local term rests on the others; with no
-    member's width the spread stands for the posterior too: between (1 + 1 / M); with neither (one member,
-    nan) the prior's variance is returned.
+
+@dataclass(frozen=True)
+class MemberMarginal:
+    """p(log EI | y, a member's features, sigma at its mode) on a grid: the member's posterior of EI."""
+
+    log_ei: np.ndarray
+    prob: np.ndarray
+
+    @property
+    def mean(self) -> float:
+        return float((self.prob * self.log_ei).sum())
+
+    @property
+    def var(self) -> float:
+        return float((self.prob * (self.log_ei - self.mean) ** 2).sum())
+
+    def draws(self, k: int, rng: np.random.Generator) -> np.ndarray:
+        """k draws of log EI: a grid cell by its probability, uniform within it."""
+        h = self.log_ei[1] - self.log_ei[0]
+        i = rng.choice(self.prob.size, size=k, p=self.prob)
+        return self.log_ei[i] + h * (rng.random(k) - 0.5)
+
+
+def member_marginal(
+    ll: LastLayer, grid: SigmaGrid, ei_prior: EIPrior, log_shift: float, sd: float
+) -> MemberMarginal | None:
+    """Member's exact last-layer marginal of log EI on the measured data (sigma, and an AR(1)
+    coefficient, held at their modes), times the EI prior; log EI = log theta + `log_shift`. The grid
+    starts at the member's trained EI, `sd` (its local width) sets its step, and it follows the peak:
+    the trained EI can sit several local widths from the marginal's mean (module docstring). None when
+    there is no width (`sd` nan) or the density never falls off within the grid."""
+    import torch
+
+    if not (math.isfinite(sd) and sd > 0):
+        return None
+    centre, half = math.log(ll.theta_fit), MARGINAL_HALF_WIDTH * sd
+    ls = torch.tensor(math.log(grid.mode), dtype=torch.float64)
+    for _ in range(MARGINAL_TRIES):
+        g = centre + np.linspace(-half, half, MARGINAL_POINTS)
+        with torch.no_grad():
+            lp = np.array(
+                [
+                    float(ll.log_marginal(torch.tensor(v, dtype=torch.float64), ls, grid.z_mode))
+                    for v in g
+                ]
+            )
+        lp = lp - 0.5 * ((g + log_shift - ei_prior.loc) / ei_prior.log_sd) ** 2
+        p = np.exp(lp - lp.max())
+        if max(p[0], p[-1]) < GRID_EDGE:
+            return MemberMarginal(g + log_shift, p / p.sum())
+        centre, half = float(g[int(np.argmax(p))]), half * MARGINAL_WIDEN
+    return None
+
+
+def pool_log_ei(
+    log_ei_fit: np.ndarray, marginals: list, prior_log_sd: float
+) -> tuple[float, float, float, float, float]:
+    """(mean, between-member variance, mean local variance, members with a marginal, ensemble variance) of
+    log EI.
+
+    The ensemble's posterior is the equal mixture of its members' marginals (module docstring): mean the
+    mean of their means, variance the mean of their variances plus the variance of their means. Members
+    without a marginal (None) are left out. With no member's marginal the trained EIs stand for the
+    posterior: their mean, variance between (1 + 1 / M); with one member and none, the prior's variance.
     """
-    log_ei_m, lap_sd = np.asarray(log_ei_m, float), np.asarray(lap_sd, float)
-    M = log_ei_m.size
-    between = float(np.var(log_ei_m, ddof=1)) if M > 1 else 0.0
-    ok = np.isfinite(lap_sd)
-    lap_var = float(np.mean(lap_sd[ok] ** 2)) if ok.any() else 0.0
-    if ok.any():
-        pooled = lap_var + between / M
-    elif M > 1:
-        pooled = between * (1.0 + 1.0 / M)
-    else:
-        pooled = prior_log_sd**2
-    return between, lap_var, float(ok.sum()), pooled
+    log_ei_fit = np.asarray(log_ei_fit, float)
+    M = log_ei_fit.size
+    ok = [m for m in marginals if m is not None]
+    if ok:
+        means = np.array([m.mean for m in ok])
+        between = float(np.var(means))
+        lap_var = float(np.mean([m.var for m in ok]))
+        return float(means.mean()), between, lap_var, float(len(ok)), lap_var + between
+    between = float(np.var(log_ei_fit, ddof=1)) if M > 1 else 0.0
+    pooled = between * (1.0 + 1.0 / M) if M > 1 else prior_log_sd**2
+    return float(log_ei_fit.mean()), between, 0.0, 0.0, pooled
 
 
 def _rto_data(
@@ -601,23 +668,33 @@ def pooled_posterior(
     phase 2's last layers unless given) pooled with their spread."""
     member_EI = p2.EI
     log_ei_m = np.log(member_EI)
-    # per member, on the measured data: the noise level's grid posterior and the local width of log EI
+    # per member, on the measured data: the noise level's grid posterior, the local width of log EI and
+    # the member's marginal of log EI (its posterior given its features), centred where the data put it
     lls, grids = p2.last_layers, p2.grids
-    if lap_sd is None:
-        with torch_threads(1):
+    shifts = [math.log(base.EI_ref) - math.log(f) for f in p2.beta_factor]
+    with torch_threads(1):
+        if lap_sd is None:
             lap_sd = np.array([local_sd(ll, g, ei_prior) for ll, g in zip(lls, grids, strict=True)])
-    between, lap_var, lap_dof, pooled = pool_log_ei(log_ei_m, lap_sd, ei_prior.log_sd)
+        marginals = [
+            member_marginal(ll, g, ei_prior, sh, float(sd))
+            for ll, g, sh, sd in zip(lls, grids, shifts, lap_sd, strict=True)
+        ]
+    mu, between, lap_var, n_marg, pooled = pool_log_ei(log_ei_m, marginals, ei_prior.log_sd)
     warn = []
-    if not np.isfinite(lap_sd).all():
-        bad = [int(i) for i in np.flatnonzero(~np.isfinite(lap_sd))]
+    bad = [i for i, m in enumerate(marginals) if m is None]
+    if bad:
         warn.append(
-            f"member(s) {bad}: the last-layer marginal likelihood has no peak in EI at the member's own "
-            "fit, so they give no local width; the interval rests on the other members' widths "
-            "and on the spread between members"
+            f"member(s) {bad}: the last-layer marginal likelihood has no peak in EI near the member's own "
+            "fit, so they give no posterior of their own; the interval rests on the other members"
+            + ("" if n_marg else " (none has one: on the spread between the trained members)")
         )
-    mu = float(np.mean(log_ei_m))
     draw_rng = np.random.default_rng(seeding.child(seed, "ensemble", 0))
-    log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
+    ok = [m for m in marginals if m is not None]
+    if ok:  # the equal mixture of the members' marginals
+        log_ei = np.concatenate([m.draws(-(-N_DRAWS // len(ok)), draw_rng) for m in ok])[:N_DRAWS]
+        log_ei = log_ei[draw_rng.permutation(N_DRAWS)]
+    else:
+        log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
     rho = None
     if grids[0].z is None:
         sigma = np.concatenate([g.draws(-(-N_DRAWS // M), draw_rng) for g in grids])[:N_DRAWS]
@@ -631,10 +708,16 @@ def pooled_posterior(
     info = {
         "members": M,
         "member_EI": member_EI.tolist(),
-        "member_local_sd_log_EI": [float(v) if np.isfinite(v) else None for v in lap_sd],
+        "member_posterior_EI": [None if m is None else math.exp(m.mean) for m in marginals],
+        "member_local_sd_log_EI": [None if m is None else math.sqrt(m.var) for m in marginals],
+        "fit_between_sd_log_EI": float(np.std(log_ei_m, ddof=1)) if M > 1 else 0.0,
         "between_sd_log_EI": math.sqrt(between),
         "local_sd_log_EI": math.sqrt(lap_var),
-        "pooling": f"local (grid) variance of {lap_dof:g} members + between-member variance / {M} (the mean's Monte Carlo error)",
+        "pooling": (
+            f"equal mixture of {n_marg:g} members' last-layer marginals of EI"
+            if n_marg
+            else f"the {M} trained EIs: their spread x (1 + 1/{M})"
+        ),
         "sigma_hat_rto": sigma_hat,
         "member_sigma_mode": [g.mode for g in grids],
         **(
@@ -649,13 +732,13 @@ def pooled_posterior(
         info["note"] = "a single member has no spread: its interval is its own local width only"
     if not ident:
         info["note"] = "EI is not identified by these data"
-    # self-check: members that scatter far more than each one's own (local) uncertainty have not
-    # converged to the same answer; the pooled interval then mostly measures optimisation scatter
-    if M > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var:
+    # self-check: members whose posteriors' means scatter far more than each one's own width read EI
+    # differently from their features; the mixture is then mostly the spread between networks
+    if n_marg > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var:
         msg = (
-            f"the members disagree: their EI spread (sd {math.sqrt(between):.3f} in log EI) is "
-            f"{math.sqrt(between / lap_var):.1f} x each member's own uncertainty ({math.sqrt(lap_var):.3f}); "
-            "training has not converged to one answer, so this interval mostly measures optimisation scatter"
+            f"the members disagree: their posteriors' means spread by sd {math.sqrt(between):.3f} in log EI, "
+            f"{math.sqrt(between / lap_var):.1f} x each member's own width ({math.sqrt(lap_var):.3f}); "
+            "the networks have not converged to one answer, so this interval mostly measures their scatter"
         )
         warn.append(msg)
     for msg in warn:
@@ -671,12 +754,12 @@ def pooled_posterior(
         [
             LastLayerPredictor(
                 ll,
-                np.full(64, math.log(ll.theta_fit)),
+                np.full(64, math.log(ll.theta_fit)) if m is None else m.draws(64, draw_rng) - sh,
                 np.full(64, math.log(g.mode)),
-                math.log(base.EI_ref) - math.log(f),
+                sh,
                 None if g.z is None else np.full(64, g.z_mode),
             )
-            for ll, g, f in zip(lls, grids, p2.beta_factor, strict=True)
+            for ll, g, sh, m in zip(lls, grids, shifts, marginals, strict=True)
         ]
     )
     kw = dict(
