@@ -61,12 +61,24 @@ FALSE_FAILURE = 0.01
 ECDF_BAND = 0.99
 
 
+#: entries a table row copies from its study file: a row whose entries differ is not that file's
+ROW_MATCHES_STUDY = ("replicates", "hits", "code_version", "fingerprint", "runtime_s")
+
+
 def freshness(row: dict, out: Path | None = None) -> str:
     """'today's code' (directly, or vouched for by an identical replay: `uq.coverage.replay`), or why the row
     is stale: the code version its replicates were computed by against today's (`coverage_version`)."""
     if row.get("code_version") is None:
         return "**stale**: predates code versions; not re-run with today's code yet"
     if out is not None and row.get("file") and (out / row["file"]).is_file():
+        study = json.loads((out / row["file"]).read_text(encoding="utf-8"))
+        if any(study.get(k) != row.get(k) for k in ROW_MATCHES_STUDY):
+            # the study file was rewritten (e.g. by a run stopped before it merged its row): the row's
+            # numbers are not those of the file its freshness would be read from
+            return (
+                f"**stale**: the row's numbers are not those of {row['file']}; "
+                "re-run its study to bring them together"
+            )
         fresh, how = study_freshness(out / row["file"])
         if fresh:
             return how
@@ -506,7 +518,6 @@ def main(argv: list[str] | None = None) -> int:
         replicates=reps,
         workers=args.workers or c.cpu_count(),
     )
-    new_rows = []
     for m, key in zip(methods, keys, strict=True):
         for snr in levels:
             log.info("coverage: %s at %s dB, %d replicates", key, snr_label(snr), reps[m])
@@ -534,7 +545,11 @@ def main(argv: list[str] | None = None) -> int:
                 binomial_acceptance(res["replicates"], args.level, FALSE_FAILURE)
             )
             row["file"] = f"coverage/{key}-snr{snr_label(snr)}.json"
-            new_rows.append(row)
+            # merged at once: a run stopped in a later level keeps this level's row
+            doc = c.load_table(out / "coverage.json", SCHEMA)
+            doc.update(case="deflection", truth={"EI": cfg.beam.EI})
+            c.merge(doc, [row], prov, ("snr_db", "method"), sort_key)
+            write_page(doc, out)
             log.info(
                 "coverage: %s at %s dB: %d / %d hits (acceptance [%d, %d]), %.0f s",
                 key,
@@ -544,10 +559,6 @@ def main(argv: list[str] | None = None) -> int:
                 *row["acceptance_99"],
                 row["runtime_s"],
             )
-    doc = c.load_table(out / "coverage.json", SCHEMA)
-    doc.update(case="deflection", truth={"EI": cfg.beam.EI})
-    c.merge(doc, new_rows, prov, ("snr_db", "method"), sort_key)
-    write_page(doc, out)
     return 0
 
 

@@ -221,6 +221,14 @@ def test_coverage_modal(tmp_path):
     again = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}["modal_mcmc"]
     assert again["replicates"] == 4 and again["resumed_replicates"] == 3
     assert load(tmp_path / again["file"])["records"][:3] == full["records"]
+    assert again["code"] == "today's code"
+    # a study file rewritten without its row being merged (a run stopped in a later level, before rows
+    # were merged level by level) must not lend the row its freshness
+    f = tmp_path / again["file"]
+    f.write_text(json.dumps(dict(load(f), hits=(again["hits"] + 1) % 5)), encoding="utf-8")
+    study("coverage.py", "--report-only", "--out", str(tmp_path), "--quiet")
+    row = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}["modal_mcmc"]
+    assert row["code"].startswith("stale: the row's numbers are not those of")
 
 
 def test_bad_method_is_bad_usage(tmp_path):
