@@ -22,6 +22,10 @@ from bayespinn.uq import coverage as cov
 from bayespinn.uq.priors import NoisePrior
 
 SMOKE = TrainSettings.for_profile("smoke", lbfgs_iters=0)
+#: joint and separate training agree to this (relative): rounding only, amplified by the smoke steps
+JOINT_RTOL = 1e-4
+#: the same for the ensemble's draws (posterior sd at 30 dB: about 0.25 % of EI)
+DRAWS_RTOL = 2.5e-4
 
 
 @pytest.fixture(scope="module")
@@ -54,10 +58,13 @@ def test_joint_fit_members_equal_each_dataset_alone(two):
     a = fit(joint, SMOKE, seed=[s1, s2], members=2 * M, quiet=True)
     alone = Problem.from_config(cfg, d2, noise_sd=2e-3, anchor=(anchors[M:], 0.5))
     b = fit(alone, SMOKE, seed=s2, members=M, quiet=True)
-    np.testing.assert_array_equal(a.EI[M:], b.EI)
-    assert a.beta_factor[1] == b.beta_factor
+    # equal up to rounding: on some CPUs (an AMD EPYC here) torch's batched kernels sum in another order
+    # for 6 networks than for 3, and training carries that last-digit difference to ~3e-5 relative;
+    # a different seed moves the members by more than 4e-4 (the control below)
+    np.testing.assert_allclose(a.EI[M:], b.EI, rtol=JOINT_RTOL, atol=0)
+    assert a.beta_factor[1] == pytest.approx(b.beta_factor, rel=1e-6)  # evaluated at the EIs above
     swapped = fit(joint, SMOKE, seed=[s2, s1], members=2 * M, quiet=True)
-    assert not np.array_equal(swapped.EI[M:], b.EI)
+    assert np.min(np.abs(swapped.EI[M:] / b.EI - 1)) > 3 * JOINT_RTOL
 
 
 def test_joint_fit_refuses_uneven_split(two):
@@ -77,9 +84,10 @@ def test_ensemble_posteriors_match_each_alone(two, no_lbfgs):
     kw = dict(profile="smoke", device="cpu", executor=ex, members=3)
     both = ensemble_posteriors(ds, cfg, seeds=[11, 12], noises=noises, **kw)
     alone = ensemble_posteriors(ds[1:], cfg, seeds=[12], noises=noises[1:], **kw)
-    np.testing.assert_array_equal(both[1].EI, alone[0].EI)
+    # draw for draw up to the rounding of batched kernels (see above), a tenth of the posterior sd at most
+    np.testing.assert_allclose(both[1].EI, alone[0].EI, rtol=DRAWS_RTOL, atol=0)
     assert both[1].diagnostics["training"] == "batched (one network of 2 datasets x 3 members)"
-    assert not np.array_equal(both[0].EI, both[1].EI)
+    assert not np.allclose(both[0].EI, both[1].EI, rtol=DRAWS_RTOL, atol=0)
     with pytest.raises(ValueError, match="one seed and one noise prior per dataset"):
         ensemble_posteriors(ds, cfg, seeds=[11], noises=noises, **kw)
 
