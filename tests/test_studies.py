@@ -373,3 +373,20 @@ def test_check_quadrature_accepts_the_modal_reference_and_rejects_a_wrong_one(tm
     heavy.write_text("[beam]\nmass_per_length = 400.0\n")
     bad = study("check_quadrature.py", str(run), "--config", str(heavy), expect=1)
     assert "MISSES" in bad.stdout
+
+
+@pytest.mark.slow
+def test_pde_sd_sweep_rebuilds_members_with_each_factor(tmp_path):
+    """The strain diagnostic (issue 21): one ensemble, each member's last layer rebuilt per PDE pseudo-sd
+    factor. A larger pseudo-sd says less about EI from the physics, so the members' marginals widen; were
+    the factor not applied, every factor would give the same widths and this would fail."""
+    study("pde_sd_sweep.py", "0", "--case", "strain", "--profile", "smoke", "--out", str(tmp_path))
+    doc = load(tmp_path / "pde-sd-strain-bridge0.json")
+    assert doc["case"] == "strain" and doc["profile"] == "smoke" and doc["ref_sd_log_EI"] > 0
+    rows = doc["factors"]
+    assert list(rows) == ["1", "3", "10", "30", "100"]
+    for r in rows.values():
+        assert 1 <= len(r["member_z"]) == len(r["member_width"]) <= 5
+        assert all(math.isfinite(w) and w > 0 for w in r["member_width"])
+    widths = [sum(r["member_width"]) / len(r["member_width"]) for r in rows.values()]
+    assert widths[-1] > 1.05 * widths[0], widths
