@@ -58,19 +58,21 @@ def sweep(index: int, case: str, profile: str = "fast") -> dict:
         cap.update(p2=p2, base=base, prior=ei_prior)
         return orig_pool(p1, p2, sigma_hat, base, ei_prior, *a, **k)
 
-    E._last_layer, E.pooled_posterior = rec_ll, rec_pool
     noise = NoisePrior.build("vague", data.value, SNR_DB)
-    post = E.ensemble_posterior(
-        data,
-        b.cfg,
-        seed=ensemble_seed(seq),
-        members=5,
-        profile=profile,
-        device="cpu",
-        noise=noise,
-        executor=Executor("local", workers=1),
-    )
-    E._last_layer, E.pooled_posterior = orig_ll, orig_pool
+    E._last_layer, E.pooled_posterior = rec_ll, rec_pool
+    try:
+        post = E.ensemble_posterior(
+            data,
+            b.cfg,
+            seed=ensemble_seed(seq),
+            members=5,
+            profile=profile,
+            device="cpu",
+            noise=noise,
+            executor=Executor("local", workers=1),
+        )
+    finally:
+        E._last_layer, E.pooled_posterior = orig_ll, orig_pool
     le = np.log(post.EI.ravel())
     out = {
         "bridge": index,
