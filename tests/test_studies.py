@@ -390,3 +390,14 @@ def test_pde_sd_sweep_rebuilds_members_with_each_factor(tmp_path):
         assert all(math.isfinite(w) and w > 0 for w in r["member_width"])
     widths = [sum(r["member_width"]) / len(r["member_width"]) for r in rows.values()]
     assert widths[-1] > 1.05 * widths[0], widths
+
+
+def test_strain_offset_check_recovers_the_truth_from_its_own_model(tmp_path):
+    """The point-load model fitted to its own prediction returns the true EI, and the Gaussian model with
+    its bias factor does too (the factor is that very fit); without the factor it would sit log(factor)
+    away, which the control checks is far more than the tolerance."""
+    study("strain_offset_check.py", "--bridges", "1", "--out", str(tmp_path))
+    (row,) = load(tmp_path / "offset-checks-strain.json")
+    own = row["fits_log_ratio"]["clean_modal"]
+    assert abs(own["point"]) < 1e-8 and abs(own["gauss_corrected"]) < 1e-7
+    assert abs(math.log(row["beta_factor"])) > 1e3 * 1e-7  # the control: uncorrected is far off
