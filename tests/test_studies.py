@@ -14,6 +14,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
@@ -384,12 +385,39 @@ def test_pde_sd_sweep_rebuilds_members_with_each_factor(tmp_path):
     doc = load(tmp_path / "pde-sd-strain-bridge0.json")
     assert doc["case"] == "strain" and doc["profile"] == "smoke" and doc["ref_sd_log_EI"] > 0
     rows = doc["factors"]
-    assert list(rows) == ["1", "3", "10", "30", "100"]
+    assert list(rows) == ["1", "3", "10", "30", "100", "ess", "gls"]
     for r in rows.values():
         assert 1 <= len(r["member_z"]) == len(r["member_width"]) <= 5
         assert all(math.isfinite(w) and w > 0 for w in r["member_width"])
-    widths = [sum(r["member_width"]) / len(r["member_width"]) for r in rows.values()]
+    widths = [sum(r["member_width"]) / len(r["member_width"]) for r in list(rows.values())[:5]]
     assert widths[-1] > 1.05 * widths[0], widths
+    for c in doc["residual_correlation"]:  # the factor each member's "ess" row used
+        assert 1.0 <= c["n_eff"] <= c["n"]
+        assert c["factor"] == pytest.approx(math.sqrt(c["n"] / c["n_eff"]), rel=1e-3)
+
+
+def test_residual_effective_count_follows_the_correlation(monkeypatch):
+    """`pde_sd_sweep.fit_correlation`'s n_eff = n^2 / sum_ij C_ij: a constant field is one observation,
+    a smooth one a handful, white noise hundreds. The control: summing the correlation only within the
+    blocks it is computed in (not over every pair) would count the constant field as n / 500 = 2. The fit
+    runs on 200 points (600 in the study) to keep the test fast."""
+    sys.path.insert(0, str(STUDIES))
+    try:
+        import pde_sd_sweep as S
+    finally:
+        sys.path.remove(str(STUDIES))
+    rng = np.random.default_rng(1)
+    n = 1000
+    xi, tau = rng.uniform(size=n), rng.uniform(size=n)
+    monkeypatch.setattr(S, "CORR_FIT_POINTS", 200)
+    fit = lambda r: S.fit_correlation(xi, tau, r, np.random.default_rng(0))  # noqa: E731
+    const = fit(np.ones(n) + 1e-3 * rng.normal(size=n))
+    assert const["n_eff"] < 1.5, const
+    smooth = fit(np.sin(3 * xi) * np.cos(4 * tau))
+    assert 1.0 < smooth["n_eff"] < 10.0, smooth
+    white = fit(rng.normal(size=n))
+    assert white["n_eff"] > 200.0, white
+    assert white["factor"] == pytest.approx(math.sqrt(n / white["n_eff"]))
 
 
 def test_strain_offset_check_recovers_the_truth_from_its_own_model(tmp_path):
