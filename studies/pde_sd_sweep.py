@@ -126,11 +126,12 @@ def residual(ll: LL.LastLayer) -> tuple[torch.Tensor, ...]:
     return rows, ll.theta_fit * P4 @ ll.beta_fit + P2 @ ll.beta_fit - ll.f
 
 
-def gls_view(ll: LL.LastLayer, fit: dict) -> LL.LastLayer:
-    """The member's last-layer model with its PDE rows (and load) whitened by the fitted correlation."""
+def gls_view(ll: LL.LastLayer, rows: tuple, fit: dict) -> LL.LastLayer:
+    """The member's last-layer model with its PDE rows (and load) whitened by the fitted correlation;
+    ``rows`` its design rows (`residual`)."""
     if ll.pde_v is not None:
         raise ValueError("the GLS view needs free vibrations that solve the PDE exactly")
-    (D, P4, P2, Bm, Cm), _ = residual(ll)
+    D, P4, P2, Bm, Cm = rows
     xi, tau = ll.xi_f.numpy(), ll.tau_f.numpy()
     C = correlation(xi, tau, fit["ell_xi"], fit["ell_tau"], fit["nugget"]) + 1e-10 * np.eye(len(xi))
     L = torch.as_tensor(np.linalg.cholesky(C))
@@ -237,9 +238,10 @@ def rebuild(state: dict) -> dict:
             print(out["bridge"], fac, out["factors"][f"{fac:g}"], flush=True)
         LL.PDE_SD_FACTOR = 1.0
         lls = build()
-        fits = []
+        fits, rows = [], []
         for m, ll in enumerate(lls):
-            _, r = residual(ll)
+            rw, r = residual(ll)
+            rows.append(rw)
             rng = np.random.default_rng(m)
             fits.append(fit_correlation(ll.xi_f.numpy(), ll.tau_f.numpy(), r.numpy(), rng))
         out["residual_correlation"] = [{k: round(v, 4) for k, v in f.items()} for f in fits]
@@ -249,7 +251,9 @@ def rebuild(state: dict) -> dict:
             ess.append(E._last_layer(*a, **k))
         out["factors"]["ess"] = row(ess)
         print(out["bridge"], "ess", out["factors"]["ess"], flush=True)
-        out["factors"]["gls"] = row([gls_view(ll, f) for ll, f in zip(lls, fits, strict=True)])
+        out["factors"]["gls"] = row(
+            [gls_view(ll, rw, f) for ll, rw, f in zip(lls, rows, fits, strict=True)]
+        )
         print(out["bridge"], "gls", out["factors"]["gls"], flush=True)
     finally:
         LL.PDE_SD_FACTOR = default
