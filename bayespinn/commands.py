@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import logging
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -15,6 +17,29 @@ from .methods import parse as parse_methods
 from .options import RunOptions, config_from_args, default_out, resolve_device
 
 log = logging.getLogger("bayespinn")
+
+
+@contextmanager
+def checkpoint_kept_on_refusal(path: Path) -> Iterator[None]:
+    """Leave a coverage study's checkpoint as it was when the study refuses to mix code versions.
+
+    `coverage_study` opens its checkpoint (which rewrites the file with the resumed study's replicates) before
+    it checks their code versions, so a refused resume would leave the refused replicates in the checkpoint
+    and the next run without `--resume` would be refused again (a known bug of the library function; its fix
+    waits for a change that stales the coverage driver's code version anyway). Only that refusal restores the
+    file: any other stop keeps the replicates finished so far.
+    """
+    path = Path(path)
+    before = path.read_bytes() if path.exists() else None
+    try:
+        yield
+    except InputError as e:
+        if e.field == "--mix-versions":
+            if before is None:
+                path.unlink(missing_ok=True)
+            else:
+                path.write_bytes(before)
+        raise
 
 
 def _opts(args, snr_db) -> RunOptions:
@@ -85,21 +110,22 @@ def cmd_coverage(args) -> int:
     )
     # finished replicates survive an interruption here; the same command resumes from them
     partial = out.with_name(out.name + ".partial.jsonl")
-    res = coverage_study(
-        method,
-        cfg,
-        snr,
-        replicates=args.replicates,
-        level=args.level,
-        seed=args.seed,
-        truth=args.truth,
-        opts=replace(opts, executor=None),
-        executor=opts.executor,
-        progress=not args.quiet,
-        checkpoint=partial,
-        resume_from=out if args.resume else None,
-        mix_versions=args.mix_versions,
-    )
+    with checkpoint_kept_on_refusal(partial):
+        res = coverage_study(
+            method,
+            cfg,
+            snr,
+            replicates=args.replicates,
+            level=args.level,
+            seed=args.seed,
+            truth=args.truth,
+            opts=replace(opts, executor=None),
+            executor=opts.executor,
+            progress=not args.quiet,
+            checkpoint=partial,
+            resume_from=out if args.resume else None,
+            mix_versions=args.mix_versions,
+        )
     atomic_write_text(out, json.dumps(jsonable(res), indent=2) + "\n")
     partial.unlink(missing_ok=True)
     log.info(

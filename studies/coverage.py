@@ -29,6 +29,7 @@ from pathlib import Path
 import common as c
 import numpy as np
 
+from bayespinn.commands import checkpoint_kept_on_refusal
 from bayespinn.config import preset, snr_label
 from bayespinn.errors import InputError
 from bayespinn.executor import Executor
@@ -524,20 +525,21 @@ def main(argv: list[str] | None = None) -> int:
             # finished replicates survive an interruption; the same command resumes from them
             study = out / "coverage" / f"{key}-snr{snr_label(snr)}.json"
             partial = study.with_name(study.name + ".partial.jsonl")
-            res = coverage_study(
-                m,
-                cfg,
-                snr,
-                replicates=reps[m],
-                level=args.level,
-                seed=args.seed,
-                opts=replace(c.run_options(args, snr), progress=False),
-                executor=executor,
-                progress=not args.quiet,
-                checkpoint=partial,
-                resume_from=study if args.resume else None,
-                mix_versions=args.mix_versions,
-            )
+            with checkpoint_kept_on_refusal(partial):
+                res = coverage_study(
+                    m,
+                    cfg,
+                    snr,
+                    replicates=reps[m],
+                    level=args.level,
+                    seed=args.seed,
+                    opts=replace(c.run_options(args, snr), progress=False),
+                    executor=executor,
+                    progress=not args.quiet,
+                    checkpoint=partial,
+                    resume_from=study if args.resume else None,
+                    mix_versions=args.mix_versions,
+                )
             c.write_json(study, res)
             partial.unlink(missing_ok=True)
             row = {k: v for k, v in res.items() if k != "records"}
