@@ -5,7 +5,8 @@
 The GPU study (`studies/gpu_check.sh`) and the committed CPU studies in reports/paper/coverage share
 their datasets (same seed, SNR and replicate index). Against the modal reference of the same data it
 reports the sd of z and the median sd ratio (`coverage.paired_with_reference`), and each one's ratio to the
-CPU ensemble study's; hits against the binomial 99 % region; with --many, the many_networks rows. Writes
+CPU ensemble study's on the datasets both studies ran (a GPU study extended past the CPU study's replicates
+is also set against the reference on all of its own); hits against the binomial 99 % region; with --many, the many_networks rows. Writes
 <study>.compare.json beside the study and prints a Markdown summary.
 """
 
@@ -25,13 +26,22 @@ from bayespinn.uq.coverage import binomial_acceptance, paired_with_reference  # 
 TOLERANCE = 0.2
 
 
+def _only(doc: dict, indices: set[int]) -> dict:
+    """The study with only the replicates of `indices`."""
+    return dict(doc, records=[r for r in doc["records"] if r["index"] in indices])
+
+
 def compare(study: dict, cpu_dir: Path) -> dict:
     snr = study["snr_db"]
     ref = json.loads((cpu_dir / f"modal_mcmc-snr{snr:g}.json").read_text())
     cpu = json.loads((cpu_dir / f"{study['method']}-snr{snr:g}.json").read_text())
-    gpu_pair = paired_with_reference(study, ref)
-    cpu_pair = paired_with_reference(cpu, ref)
-    if gpu_pair is None or cpu_pair is None:
+    # the ratios compare the two studies on the datasets both ran (a GPU study extended past the CPU
+    # study's replicates is also set against the reference on all of its own)
+    both = {r["index"] for r in study["records"]} & {r["index"] for r in cpu["records"]}
+    gpu_all = paired_with_reference(study, ref)
+    gpu_pair = paired_with_reference(_only(study, both), ref)
+    cpu_pair = paired_with_reference(_only(cpu, both), ref)
+    if gpu_all is None or gpu_pair is None or cpu_pair is None:
         raise SystemExit(
             "the studies do not share their datasets (seed, SNR, case, truth, seeding)"
         )
@@ -40,8 +50,10 @@ def compare(study: dict, cpu_dir: Path) -> dict:
         "study": {k: study[k] for k in ("method", "snr_db", "replicates", "hits", "runtime_s")},
         "acceptance_99": [lo, hi],
         "hits_inside": lo <= study["hits"] <= hi,
+        "shared_datasets": len(both),
         "gpu_vs_reference": gpu_pair,
         "cpu_vs_reference": cpu_pair,
+        "gpu_all_vs_reference": gpu_all,
         "cpu_study_code_version": cpu.get("code_version"),
         "tolerance": TOLERANCE,
     }
@@ -65,6 +77,7 @@ def main(argv=None) -> int:
     dest = a.study.with_name(a.study.name.removesuffix(".json") + ".compare.json")
     dest.write_text(json.dumps(res, indent=2) + "\n")
     g, c = res["gpu_vs_reference"], res["cpu_vs_reference"]
+    print(f"On the {res['shared_datasets']} datasets both studies ran:\n")
     print("| | GPU | CPU study | GPU / CPU |\n|---|---|---|---|")
     print(f"| sd of z | {g['sd_z']:.2f} | {c['sd_z']:.2f} | {res['sd_z_ratio_to_cpu']:.2f} |")
     print(
@@ -72,8 +85,13 @@ def main(argv=None) -> int:
         f"{res['median_sd_ratio_ratio_to_cpu']:.2f} |"
     )
     print(
-        f"| hits | {study['hits']} / {study['replicates']} | {c['hits']} / {c['datasets']} | "
-        f"region {res['acceptance_99']} |"
+        f"| hits | {g['hits']} / {g['datasets']} | {c['hits']} / {c['datasets']} | "
+        f"reference {c['reference_hits']} |"
+    )
+    a = res["gpu_all_vs_reference"]
+    print(
+        f"\nThe whole GPU study: {study['hits']} / {study['replicates']} hits (99 % region "
+        f"{res['acceptance_99']}), sd of z {a['sd_z']:.2f}, median sd ratio {a['median_sd_ratio']:.2f}"
     )
     print(f"\nGPU study runtime {study['runtime_s']:.0f} s; written {dest}")
     for r in (res.get("many_networks") or {}).get("rows", []):

@@ -201,6 +201,8 @@ def test_coverage_modal(tmp_path):
     rows = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}
     pr = rows["ensemble"]["paired_reference"]
     assert pr["datasets"] == 3 and pr["mean_z"] == 0.0 and pr["median_sd_ratio"] == 1.0
+    # the ranks of both on the shared datasets: the copy's are the reference's, so are their p values
+    assert pr["rank_uniformity_p"] == pr["reference_rank_uniformity_p"] == full["rank_uniformity_p"]
     assert "paired_reference" not in rows["modal_mcmc"]
     assert "dataset by dataset" in (tmp_path / "coverage.md").read_text(encoding="utf-8")
     # a study carried on later: --resume reuses the 3 replicates of its file and runs one more
@@ -429,3 +431,36 @@ def test_strain_offset_check_recovers_the_truth_from_its_own_model(tmp_path):
     own = row["fits_log_ratio"]["clean_modal"]
     assert abs(own["point"]) < 1e-8 and abs(own["gauss_corrected"]) < 1e-7
     assert abs(math.log(row["beta_factor"])) > 1e3 * 1e-7  # the control: uncorrected is far off
+
+
+def test_gpu_compare_sets_the_studies_side_by_side_on_the_datasets_both_ran(tmp_path):
+    """A GPU study extended past the CPU study's replicates is compared with it on the shared datasets only;
+    the extra replicates count in the GPU study's own row against the reference. Control: an extreme
+    replicate beyond the CPU study moves the whole-study sd of z but not the side-by-side ratio."""
+    head = {"seed": 0, "snr_db": 30.0, "case": "deflection", "truth": "fixed", "level": 0.9}
+    head |= {"seeding": "seed/snr/index", "method": "ensemble", "runtime_s": 1.0}
+
+    def doc(errs, sds, method="ensemble"):
+        recs = [
+            {"index": i, "rel_error_pct": e, "sd_rel_pct": s, "hit": abs(e) < 1.64 * s}
+            for i, (e, s) in enumerate(zip(errs, sds, strict=True))
+        ]
+        hits = sum(r["hit"] for r in recs)
+        return head | {"method": method, "replicates": len(recs), "hits": hits, "records": recs}
+
+    cpu_dir = tmp_path / "cpu"
+    cpu_dir.mkdir()
+    ref = doc([0.0, 0.1, -0.1, 0.0], [0.2] * 4, "modal_mcmc")
+    (cpu_dir / "modal_mcmc-snr30.json").write_text(json.dumps(ref))
+    (cpu_dir / "ensemble-snr30.json").write_text(json.dumps(doc([0.02, 0.1, -0.14], [0.2] * 3)))
+    gpu = tmp_path / "gpu.json"
+    gpu.write_text(json.dumps(doc([0.0, 0.12, -0.12, 2.0], [0.2, 0.2, 0.2, 0.22])))
+    r = study("gpu_compare.py", str(gpu), "--cpu", str(cpu_dir))
+    assert "On the 3 datasets both studies ran" in r.stdout
+    res = json.loads((tmp_path / "gpu.compare.json").read_text())
+    assert res["shared_datasets"] == 3 and res["gpu_vs_reference"]["datasets"] == 3
+    assert res["gpu_all_vs_reference"]["datasets"] == 4
+    assert res["gpu_all_vs_reference"]["max_abs_z"] == pytest.approx(10.0)  # the extreme replicate
+    assert res["gpu_vs_reference"]["sd_z"] == pytest.approx(0.1)  # z = 0, 0.1, -0.1
+    assert res["sd_z_ratio_to_cpu"] == pytest.approx(0.1 / np.std([0.1, 0.0, -0.2], ddof=1))
+    assert res["median_sd_ratio_ratio_to_cpu"] == pytest.approx(1.0)
