@@ -287,6 +287,21 @@ def test_ray_tasks_ask_for_a_gpu_share_only_when_training_on_cuda():
     assert task_resources("cuda:1")["num_gpus"] == GPU_FRACTION
 
 
+def _small_modal_study(n, **kw):
+    """A modal coverage study of n replicates at 10 dB: small settings, one worker."""
+    return coverage_study(
+        "modal",
+        preset(),
+        10.0,
+        replicates=n,
+        seed=3,
+        opts=SMALL,
+        progress=False,
+        executor=Executor("local", workers=1),
+        **kw,
+    )
+
+
 def test_coverage_resume_refuses_other_code_unless_asked(tmp_path, monkeypatch):
     """Replicates computed by other code (another code version) are not mixed into a study silently: the
     resume raises InputError naming --mix-versions; asked to mix, the study records both versions."""
@@ -294,29 +309,16 @@ def test_coverage_resume_refuses_other_code_unless_asked(tmp_path, monkeypatch):
 
     from bayespinn.errors import InputError
 
-    def run(n, **kw):
-        return coverage_study(
-            "modal",
-            preset(),
-            10.0,
-            replicates=n,
-            seed=3,
-            opts=SMALL,
-            progress=False,
-            executor=Executor("local", workers=1),
-            **kw,
-        )
-
     first = tmp_path / "first.json"
-    doc = run(2)
+    doc = _small_modal_study(2)
     assert doc["code_versions"] == {doc["code_version"]: 2} and doc["mixed_versions"] is False
     doc["records"][0]["code_version"] = (
         "0123456789ab"  # as if computed before a change to the method
     )
     first.write_text(json.dumps(doc), encoding="utf-8")
     with pytest.raises(InputError, match="--mix-versions"):
-        run(3, resume_from=first)
-    mixed = run(3, resume_from=first, mix_versions=True)
+        _small_modal_study(3, resume_from=first)
+    mixed = _small_modal_study(3, resume_from=first, mix_versions=True)
     assert mixed["mixed_versions"] is True and mixed["resumed_replicates"] == 2
     assert mixed["code_versions"] == {"0123456789ab": 1, mixed["code_version"]: 2}
 
@@ -334,26 +336,13 @@ def test_a_refused_resume_leaves_the_checkpoint_as_it_was(tmp_path):
 
     from bayespinn.errors import InputError
 
-    def run(n, **kw):
-        return coverage_study(
-            "modal",
-            preset(),
-            10.0,
-            replicates=n,
-            seed=3,
-            opts=SMALL,
-            progress=False,
-            executor=Executor("local", workers=1),
-            **kw,
-        )
-
     first = tmp_path / "first.json"
-    doc = run(1)
+    doc = _small_modal_study(1)
     doc["records"][0]["code_version"] = "0123456789ab"
     first.write_text(json.dumps(doc), encoding="utf-8")
     ck = tmp_path / "study.json.partial.jsonl"
     with pytest.raises(InputError, match="--mix-versions"):
-        run(2, resume_from=first, checkpoint=ck)
+        _small_modal_study(2, resume_from=first, checkpoint=ck)
     kept = ck.read_text(encoding="utf-8").splitlines()[1:] if ck.exists() else []
     assert kept == []
 
