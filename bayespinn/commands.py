@@ -29,8 +29,10 @@ def checkpoint_kept_on_refusal(path: Path) -> Iterator[None]:
     waits for a change that stales the coverage driver's code version anyway). Only that refusal restores the
     file: any other stop keeps the replicates finished so far.
     """
+    from .data.measurements import atomic_write_text
+
     path = Path(path)
-    before = path.read_bytes() if path.exists() else None
+    before = path.read_text(encoding="utf-8") if path.exists() else None
     try:
         yield
     except InputError as e:
@@ -38,7 +40,7 @@ def checkpoint_kept_on_refusal(path: Path) -> Iterator[None]:
             if before is None:
                 path.unlink(missing_ok=True)
             else:
-                path.write_bytes(before)
+                atomic_write_text(path, before)  # never a half-restored checkpoint
         raise
 
 

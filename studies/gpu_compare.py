@@ -6,8 +6,8 @@ The GPU study (`studies/gpu_check.sh`) and the committed CPU studies in reports/
 their datasets (same seed, SNR and replicate index). Against the modal reference of the same data it
 reports the sd of z and the median sd ratio (`coverage.paired_with_reference`), and each one's ratio to the
 CPU ensemble study's on the datasets both studies ran (a GPU study extended past the CPU study's replicates
-is also set against the reference on all of its own); hits against the binomial 99 % region; with --many, the many_networks rows. Writes
-<study>.compare.json beside the study and prints a Markdown summary.
+is also set against the reference on all of its own); hits against the binomial 99 % region; with --many,
+the many_networks rows. Writes <study>.compare.json beside the study and prints a Markdown summary.
 """
 
 from __future__ import annotations
@@ -35,8 +35,6 @@ def compare(study: dict, cpu_dir: Path) -> dict:
     snr = study["snr_db"]
     ref = json.loads((cpu_dir / f"modal_mcmc-snr{snr:g}.json").read_text())
     cpu = json.loads((cpu_dir / f"{study['method']}-snr{snr:g}.json").read_text())
-    # the ratios compare the two studies on the datasets both ran (a GPU study extended past the CPU
-    # study's replicates is also set against the reference on all of its own)
     both = {r["index"] for r in study["records"]} & {r["index"] for r in cpu["records"]}
     gpu_all = paired_with_reference(study, ref)
     gpu_pair = paired_with_reference(_only(study, both), ref)
