@@ -1,7 +1,31 @@
 import os
 
-import numpy as np
-import pytest
+
+def _give_each_xdist_worker_its_own_cores() -> None:
+    """Under pytest-xdist (the default run: `-n auto`, one worker per core), pin each worker to its own
+    share of this process's cores and tell BLAS/OpenMP so, before numpy or torch start their thread pools.
+
+    Every process a test starts (a CLI subprocess, a two-worker pool, Ray) inherits the share, so the
+    suite never runs more busy threads than the machine has cores, and a test that compares one worker
+    with two still runs both (on the share's cores)."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "")
+    if not worker.startswith("gw") or not hasattr(os, "sched_setaffinity"):
+        return
+    cores = sorted(os.sched_getaffinity(0))
+    n = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+    if n < 1 or n > len(cores):
+        return  # more workers than cores: nothing to share out
+    per = len(cores) // n
+    i = int(worker[2:]) % n
+    os.sched_setaffinity(0, cores[i * per : (i + 1) * per])
+    for v in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[v] = str(per)
+
+
+_give_each_xdist_worker_its_own_cores()
+
+import numpy as np  # noqa: E402 - after the thread settings above
+import pytest  # noqa: E402
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
