@@ -18,6 +18,7 @@ def _give_each_xdist_worker_its_own_cores() -> None:
     per = len(cores) // n
     i = int(worker[2:]) % n
     os.sched_setaffinity(0, cores[i * per : (i + 1) * per])
+    # bayespinn.executor._THREAD_VARS, spelt out: importing bayespinn here would load numpy too early
     for v in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[v] = str(per)
 
