@@ -60,11 +60,13 @@ def test_joint_fit_members_equal_each_dataset_alone(two):
     b = fit(alone, SMOKE, seed=s2, members=M, quiet=True)
     # equal up to rounding: on some CPUs (an AMD EPYC here) torch's batched kernels sum in another order
     # for 6 networks than for 3, and training carries that last-digit difference to ~3e-5 relative;
-    # a different seed moves the members by more than 4e-4 (the control below)
+    # a different seed moves the members by about 1e-3 (the control below)
     np.testing.assert_allclose(a.EI[M:], b.EI, rtol=JOINT_RTOL, atol=0)
     assert a.beta_factor[1] == pytest.approx(b.beta_factor, rel=1e-6)  # evaluated at the EIs above
     swapped = fit(joint, SMOKE, seed=[s2, s1], members=2 * M, quiet=True)
-    assert np.min(np.abs(swapped.EI[M:] / b.EI - 1)) > 3 * JOINT_RTOL
+    # the control fails the comparison above as it fails: through its worst member (a single member of
+    # another seed can land within 3e-4 by chance, as one did in CI at 2.97e-4)
+    assert np.max(np.abs(swapped.EI[M:] / b.EI - 1)) > 3 * JOINT_RTOL
 
 
 def test_joint_fit_refuses_uneven_split(two):
