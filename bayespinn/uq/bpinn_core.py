@@ -20,6 +20,7 @@ import torch
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
+from .conditioned import ConditionedLastLayer
 from .lastlayer import LastLayer, identified, log_prior_z
 from .nuts import laplace_factor, map_estimate, problems
 from .pinn_ar1 import AR1Posterior
@@ -123,14 +124,27 @@ def log_shift(res, problem) -> float:
 
 
 def last_layer_map(
-    res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=None, ar1=None
+    res,
+    problem,
+    data,
+    seed,
+    noise,
+    settings,
+    ei_prior,
+    shift,
+    vary_first_mode=None,
+    ar1=None,
+    conditioned=True,
 ):
     """The fit's last-layer model, its potential in (log theta, log sigma[, atanh rho]), the MAP there and the
     Laplace factor: (model, LastLayer, potential, z_map, L). With ``ar1`` (`ar1.AR1Noise` of the data) the
-    noise is AR(1), its coefficient starting at the fit residuals' lag-1 autocorrelation."""
+    noise is AR(1), its coefficient starting at the fit residuals' lag-1 autocorrelation. ``conditioned``:
+    the model in a well-conditioned basis of its weights (`conditioned.ConditionedLastLayer`, the same model
+    without the rounding noise that can make the potential too jagged for NUTS); False: the plain
+    `LastLayer`, whose rows other hidden weights can replace (`LastLayer.with_rows`, the full variant)."""
     model = res.model("cpu")
     rng = np.random.default_rng(seeding.stream(seed, "collocation"))
-    ll = LastLayer(
+    ll = (ConditionedLastLayer if conditioned else LastLayer)(
         model,
         0,
         problem,

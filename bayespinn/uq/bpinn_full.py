@@ -259,7 +259,16 @@ def full_posterior(
     shift = log_shift(res, problem)
     with torch_threads(1):  # the last-layer MAP it starts from: tiny linear algebra
         start = last_layer_map(
-            res, problem, data, seed, noise, settings, ei_prior, shift, vary_first_mode=False
+            res,
+            problem,
+            data,
+            seed,
+            noise,
+            settings,
+            ei_prior,
+            shift,
+            vary_first_mode=False,
+            conditioned=False,  # its rows change with the hidden weights (`LastLayer.with_rows`)
         )
     draws, diag, pred, stats = sample_full(start, seed, profile, device, progress, shift)
     return assemble(
