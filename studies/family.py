@@ -365,9 +365,12 @@ def blocks(page: dict) -> list:
         for prov in s.get("runs", []):
             m = prov["machine"]
             lines.append(
-                f"`{prov['command']}`; {prov['date']}; {m['cpus']} CPU cores, device {m['device']}; "
+                f"`{prov['command']}`; {prov['date']}; {m['cpus']} CPU cores"
+                + (f" ({m['cpu_model']})" if m.get("cpu_model") else "")
+                + f", device {m['device']}; "
                 f"bayespinn {prov['versions'].get('bayespinn')}, git {(prov.get('git_commit') or 'n/a')[:12]}"
                 + (" (uncommitted changes)" if prov.get("git_dirty") else "")
+                + (f"; note: {prov['note']}" if prov.get("note") else "")
             )
         out.append(Paragraph(f"Study file `{s['file']}`. Runs that computed its bridges:"))
         out.append(BulletList(lines))

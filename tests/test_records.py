@@ -120,7 +120,20 @@ def record_is_fresh(path: str) -> bool | None:
         return study_freshness(p)[0]
     if p.name in ("summary.json", "manifest.json"):
         return run_freshness(p.parent)[0]
-    return None
+    return study_records_fresh(doc)
+
+
+def study_records_fresh(doc: dict) -> bool | None:
+    """A study file whose records each carry the code versions of the methods that computed them (the
+    family of bridges): fresh when every record's are today's. None for files that carry none."""
+    from bayespinn.records import today_versions
+
+    recs = doc.get("records")
+    if not isinstance(recs, list) or not recs:
+        return None
+    if not all(isinstance(r, dict) and isinstance(r.get("code_versions"), dict) for r in recs):
+        return None
+    return all(r["code_versions"] == today_versions(r["code_versions"]) for r in recs)
 
 
 def test_every_status_number_names_a_record():
@@ -135,11 +148,55 @@ def test_every_status_number_names_a_record():
         if bad:
             problems[b[:60]] = f"numbers without a record: {bad}"
         stale = [p for p in RECORD.findall(b) if record_is_fresh(p) is False]
-        if stale and "stale" not in b:
+        unsaid = unflagged(b, stale)
+        if unsaid:
             problems[b[:60]] = (
-                f"quotes records computed by code that has changed since, without saying so: {stale}"
+                f"quotes records computed by code that has changed since, without saying so: {unsaid}"
             )
     assert not problems, json.dumps(problems, indent=1)
+
+
+def sentences(bullet: str) -> list[str]:
+    """A bullet cut into sentences: at a full stop followed by a space and a capital, a quote or a bracket
+    (a record's path, a version or a decimal has no space after its dots)."""
+    return re.split(r"(?<=\.)\s+(?=[A-Z*(`])", bullet)
+
+
+def unflagged(bullet: str, stale: list[str]) -> list[str]:
+    """The stale records of `stale` that the bullet cites without saying "stale" in the sentence that cites
+    them or the one before it: a bullet that calls one figure stale does not excuse the others."""
+    ss = sentences(bullet)
+    out = []
+    for path in stale:
+        for i, s in enumerate(ss):
+            if path in s and not any("stale" in t.lower() for t in ss[max(i - 1, 0) : i + 1]):
+                out.append(path)
+                break
+    return out
+
+
+def test_a_stale_record_must_be_called_stale_where_it_is_cited():
+    """Negative control: "stale" elsewhere in a bullet does not cover a record cited two sentences on."""
+    b = (
+        "The old run is stale (record: `reports/a.json`). Another sentence. "
+        "The new run took 3 s (record: `reports/b.json`)."
+    )
+    assert unflagged(b, ["reports/a.json"]) == []
+    assert unflagged(b, ["reports/b.json"]) == ["reports/b.json"]
+    assert unflagged(b.replace("Another sentence. ", ""), ["reports/b.json"]) == []
+
+
+def test_a_study_with_one_record_of_other_code_is_stale():
+    """Negative control: a family study whose records are today's code is fresh; one record computed by
+    another version of one method makes the whole file stale."""
+    from bayespinn.records import today_versions
+
+    today = today_versions(["modal_mcmc", "bpinn"])
+    doc = {"records": [{"code_versions": dict(today)}, {"code_versions": dict(today)}]}
+    assert study_records_fresh(doc) is True
+    doc["records"][1]["code_versions"]["bpinn"] = "0" * 12
+    assert study_records_fresh(doc) is False
+    assert study_records_fresh({"records": [{"code_version": "abc"}]}) is None
 
 
 def test_a_number_without_a_record_is_caught():
