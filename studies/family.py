@@ -218,7 +218,20 @@ def gather(out: Path) -> dict:
         if doc.get("schema") != STUDY_SCHEMA or not doc.get("records"):
             continue
         studies[p.stem] = {**doc, **summarise(doc), "file": f"family/{p.name}"}
-    return {"schema": SCHEMA, "studies": studies}
+    return {"schema": SCHEMA, "family": family_ranges(), "studies": studies}
+
+
+def family_ranges() -> dict:
+    """The ranges the family draws its bridges from (`bayespinn.family`), for the page and its JSON."""
+    return {
+        "span_m": list(family.SPAN_M),
+        "first_frequency_times_span_hz_m": list(family.F1_TIMES_L),
+        "axles": list(family.AXLES),
+        "axle_load_kn": [x / 1e3 for x in family.AXLE_LOAD_N],
+        "speed_m_s": list(family.SPEED_M_S),
+        "alpha": list(family.ALPHA),
+        "deflection_points": list(family.N_POINTS),
+    }
 
 
 def _f(v, fmt="{:+.2f}") -> str:
@@ -231,14 +244,18 @@ def _ok(text: str, ok: bool) -> str:
 
 def blocks(page: dict) -> list:
     lo, hi = family.SD_RATIO_BAND
+    r = page.get("family") or family_ranges()
+    fl = r["first_frequency_times_span_hz_m"]
     out = [
         Heading(
             "A family of bridges: the PINN posteriors against the reference on bridges never tuned on",
             1,
         ),
         Paragraph(
-            "Each bridge of the family (`bayespinn.family`: spans 10-40 m, first frequencies 60/L-180/L Hz, "
-            "1-5 axles of 20-120 kN, speed parameter alpha = v / (2 f1 L) log-uniform on 0.015-0.2) gets one "
+            f"Each bridge of the family (`bayespinn.family`: spans {r['span_m'][0]:g}-{r['span_m'][1]:g} m, "
+            f"first frequencies {fl[0]:g}/L-{fl[1]:g}/L Hz, {r['axles'][0]}-{r['axles'][1]} axles of "
+            f"{r['axle_load_kn'][0]:g}-{r['axle_load_kn'][1]:g} kN, speed parameter alpha = v / (2 f1 L) "
+            f"log-uniform on {r['alpha'][0]:g}-{r['alpha'][1]:g}) gets one "
             "synthetic dataset; the modal reference (emcee on the exact modal model) and each PINN method run "
             "on it. z = (mean - reference mean) / reference sd of EI; sd ratio = sd / reference sd; sigma z "
             "the same for the noise sd. Bands (issue 21): mean z within "
