@@ -244,7 +244,7 @@ def _ok(text: str, ok: bool) -> str:
 
 def blocks(page: dict) -> list:
     lo, hi = family.SD_RATIO_BAND
-    r = page.get("family") or family_ranges()
+    r = page["family"]
     fl = r["first_frequency_times_span_hz_m"]
     out = [
         Heading(
