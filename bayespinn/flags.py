@@ -27,6 +27,16 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str):
         raise UsageError("command line", " ".join(sys.argv[1:]), message)
 
+    def _get_value(self, action, arg_string):
+        # argparse turns any ValueError of a flag's type into "invalid <function> value"; the types of
+        # `options` raise InputError, which already names the flag, the value and what was expected
+        try:
+            return super()._get_value(action, arg_string)
+        except argparse.ArgumentError as err:
+            if isinstance(err.__context__, InputError):
+                raise err.__context__ from None
+            raise
+
 
 def add_method_flags(p: argparse.ArgumentParser) -> None:
     """The flags that choose how the methods run, declared once for the command line and the study scripts

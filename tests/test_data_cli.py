@@ -247,3 +247,23 @@ def test_cli_coverage_refused_resume_leaves_the_checkpoint_as_it_was(tmp_path):
     r = _cli(*args, "--replicates", "3", "--resume")
     assert r.returncode == 2 and "--mix-versions" in r.stderr and "Traceback" not in r.stderr
     assert partial.read_text(encoding="utf-8") == kept
+
+
+@pytest.mark.parametrize(
+    "argv, field",
+    [
+        (["coverage", "--method", "ensemble", "--snr", "30", "--replicates", "0"], "--replicates"),
+        (["run", "--snr", "10", "--seed", "-1"], "--seed"),
+        (["run", "--snr", "10", "--members", "two"], "--members"),
+        (["coverage", "--method", "modal", "--snr", "30", "--level", "1.5"], "--level"),
+    ],
+)
+def test_a_bad_flag_value_names_its_flag(argv, field):
+    """A flag whose value its type refuses is reported as that flag, its value and what was expected,
+    not as argparse's "invalid conv value"."""
+    from bayespinn.cli import build_parser
+
+    with pytest.raises(InputError) as err:
+        build_parser().parse_args(argv)
+    assert err.value.field == field and "invalid" not in str(err.value)
+    assert str(err.value).startswith(f"{field}: got '{argv[-1]}', expected ")
