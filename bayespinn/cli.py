@@ -120,6 +120,9 @@ def _cmd_simulate(args) -> int:
     snr = parse_snr(args.snr)
     if not args.out:
         raise InputError("--out", None, "the path of the CSV file to write")
+    from .commands import writable_out
+
+    writable_out(args.out, folder=False)
     cfg = config_from_args(args)
     data = simulate(cfg, snr, args.seed)
     data.to_csv(args.out)

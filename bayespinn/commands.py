@@ -44,6 +44,36 @@ def checkpoint_kept_on_refusal(path: Path) -> Iterator[None]:
         raise
 
 
+def writable_out(path: str | Path, *, folder: bool) -> Path:
+    """`--out` checked before any work starts: a run that trains for minutes must not find at its end that
+    it cannot write. `folder`: the command writes a folder there (else one file). The nearest part of the
+    path that exists must be a folder this user can create entries in (probed by creating and removing a
+    temporary one, which also catches read-only mounts), and the path itself, if it exists, of the right kind.
+    """
+    import tempfile
+
+    path = Path(path)
+    kind = "folder" if folder else "file"
+    if path.exists() and path.is_dir() != folder:
+        raise InputError(
+            "--out", str(path), f"a {kind} path, not an existing {'file' if folder else 'folder'}"
+        )
+    probe_in = path if path.is_dir() else path.parent
+    while not probe_in.exists():
+        probe_in = probe_in.parent
+    if not probe_in.is_dir():
+        raise InputError(
+            "--out", str(path), f"a {kind} path below folders only ({probe_in} is a file)"
+        )
+    try:
+        Path(tempfile.mkdtemp(dir=probe_in, prefix=".bayespinn-probe-")).rmdir()
+    except OSError as e:
+        raise InputError(
+            "--out", str(path), f"a {kind} path this user can write ({probe_in}: {e.strerror or e})"
+        ) from None
+    return path
+
+
 def _opts(args, snr_db) -> RunOptions:
     return RunOptions(
         profile=args.profile,
@@ -73,7 +103,7 @@ def cmd_run(args) -> int:
             raise InputError(
                 "--noise-prior", "snr", "a nominal --snr in dB to centre the noise prior on"
             )
-    out = Path(args.out) if args.out else default_out(args)
+    out = writable_out(args.out or default_out(args), folder=True)
     res = run(
         cfg, methods=methods, snr_db=snr, seed=args.seed, data_path=args.data, out=out, opts=opts
     )
@@ -103,12 +133,12 @@ def cmd_coverage(args) -> int:
     cfg = config_from_args(args)
     method = parse_methods(args.method if args.method != "all" else "modal", single=True)[0]
     opts = _opts(args, snr)
-    out = (
-        Path(args.out)
-        if args.out
-        else Path("reports")
+    out = writable_out(
+        args.out
+        or Path("reports")
         / "coverage"
-        / f"{method}-{args.case}-snr{args.snr}-seed{args.seed}.json"
+        / f"{method}-{args.case}-snr{args.snr}-seed{args.seed}.json",
+        folder=False,
     )
     # finished replicates survive an interruption here; the same command resumes from them
     partial = out.with_name(out.name + ".partial.jsonl")
@@ -154,8 +184,8 @@ def cmd_sweep(args) -> int:
     cfg = config_from_args(args)
     methods = parse_methods(args.method)
     opts = _opts(args, None)
-    out = (
-        Path(args.out) if args.out else Path("reports") / "sweeps" / f"{args.case}-seed{args.seed}"
+    out = writable_out(
+        args.out or Path("reports") / "sweeps" / f"{args.case}-seed{args.seed}", folder=True
     )
     sweep(cfg, levels=levels, methods=methods, seed=args.seed, out=out, opts=opts)
     log.info("wrote %s", out)
@@ -168,6 +198,8 @@ def cmd_bench(args) -> int:
     from .uq.posterior import jsonable
 
     device = resolve_device(args.device)
+    if args.out:
+        writable_out(args.out, folder=False)
     res = bench(device=device, progress=not args.quiet, run=args.run)
     text = json.dumps(jsonable(res), indent=2) + "\n"
     if args.out:

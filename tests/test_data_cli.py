@@ -267,3 +267,45 @@ def test_a_bad_flag_value_names_its_flag(argv, field):
         build_parser().parse_args(argv)
     assert err.value.field == field and "invalid" not in str(err.value)
     assert str(err.value).startswith(f"{field}: got '{argv[-1]}', expected ")
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["run", "--snr", "10", "--method", "modal"],
+        ["sweep", "--snr", "10,20", "--method", "modal"],
+        ["coverage", "--method", "modal", "--snr", "10", "--replicates", "2"],
+        ["simulate", "--snr", "10"],
+        ["bench"],
+    ],
+)
+def test_an_out_that_cannot_be_written_is_refused_before_any_work(tmp_path, command, capsys):
+    """--out below a file (so never creatable) is bad input, found before the command computes anything:
+    exit 2, one line naming --out and the path, and nothing written."""
+    from bayespinn.cli import main
+
+    blocker = tmp_path / "a-file"
+    blocker.write_text("x")
+    out = blocker / "sub" / ("result" if command[0] in ("run", "sweep") else "result.json")
+    assert main([*command, "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert (
+        len(err) == 1
+        and err[0].startswith("bayespinn: error: --out: got '/")
+        and "a-file" in err[0]
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a-file"] and blocker.read_text() == "x"
+
+
+def test_an_out_of_the_wrong_kind_is_refused(tmp_path):
+    from bayespinn.commands import writable_out
+
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file.json").write_text("{}")
+    with pytest.raises(InputError, match="not an existing folder"):
+        writable_out(tmp_path / "folder", folder=False)
+    with pytest.raises(InputError, match="not an existing file"):
+        writable_out(tmp_path / "file.json", folder=True)
+    assert writable_out(tmp_path / "new" / "deeper", folder=True) == tmp_path / "new" / "deeper"
+    assert not (tmp_path / "new").exists()  # checking creates nothing
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file.json", "folder"]
