@@ -49,6 +49,8 @@ def writable_out(path: str | Path, *, folder: bool) -> Path:
     it cannot write. `folder`: the command writes a folder there (else one file). The nearest part of the
     path that exists must be a folder this user can create entries in (probed by creating and removing a
     temporary one, which also catches read-only mounts), and the path itself, if it exists, of the right kind.
+    `pipeline.staged_output` creates the folder only when the results are ready; the check lives here, not
+    there, because the pipeline is part of every record's code version and the command line is not.
     """
     import tempfile
 
