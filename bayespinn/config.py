@@ -21,6 +21,12 @@ CASES = ("deflection", "strain")
 SUPPORTS = ("pinned", "springs")
 LOAD_FACTOR = ("auto", "off")
 NOISE_MODELS = ("iid", "ar1")
+#: how `simulate` models each axle: constant moving forces, or a sprung mass on a spring-damper
+VEHICLE_MODELS = ("forces", "sprung")
+#: ISO 8608 road classes: the geometric-mean Gd(n0) of each class [m^3] at n0 = 0.1 cycles/m
+ROAD_CLASSES = {"A": 16e-6, "B": 64e-6, "C": 256e-6, "D": 1024e-6}
+#: the largest relative sd of a stated speed that the analysis accepts
+MAX_SPEED_SD = 0.2
 #: the largest relative sd of the axle loads: beyond it a normal load factor would go negative too often
 MAX_LOAD_REL_SD = 0.2
 
@@ -177,15 +183,52 @@ class Axle:
 
 @dataclass(frozen=True)
 class Vehicle:
-    """Axles crossing at constant speed; the first axle enters the span at t = 0."""
+    """Axles crossing at constant speed; the first axle enters the span at `entry_time` on the data's
+    clock (0 by default: the clock starts with the entry).
+
+    model : how `simulate` makes the axle forces: "forces" (constant moving forces) or "sprung" (each
+        axle a body mass on a spring-damper over a massless contact point, static load = the axle load)
+    body_frequency : bounce frequency of a sprung axle [Hz]
+    body_damping : damping ratio of its suspension [-]
+    speed_sd : relative sd of the stated speed; > 0: the analysis infers the speed
+    entry_time : time on the data's clock when the first axle enters the span [s]
+    entry_time_sd : sd of the stated entry time [s]; > 0: the analysis infers it
+    """
 
     speed: float = EXETER_SPEED
     axles: tuple[Axle, ...] = (Axle(37000.0, 0.0),)
     #: relative sd of the true axle loads around the stated ones (one common factor); 0 = known exactly
     load_rel_sd: float = 0.0
+    model: str = "forces"
+    body_frequency: float = 2.5
+    body_damping: float = 0.1
+    speed_sd: float = 0.0
+    entry_time: float = 0.0
+    entry_time_sd: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "speed", _check_number("vehicle.speed", self.speed, positive=True))
+        if self.model not in VEHICLE_MODELS:
+            raise InputError(
+                "vehicle.model", self.model, "one of " + ", ".join(map(repr, VEHICLE_MODELS))
+            )
+        object.__setattr__(
+            self,
+            "body_frequency",
+            _check_number("vehicle.body_frequency", self.body_frequency, positive=True),
+        )
+        zb = _check_number("vehicle.body_damping", self.body_damping, nonneg=True)
+        if zb >= 1:
+            raise InputError("vehicle.body_damping", self.body_damping, "a number in [0, 1)")
+        object.__setattr__(self, "body_damping", zb)
+        ss = _check_number("vehicle.speed_sd", self.speed_sd, nonneg=True)
+        if ss > MAX_SPEED_SD:
+            raise InputError("vehicle.speed_sd", self.speed_sd, f"a number in [0, {MAX_SPEED_SD}]")
+        object.__setattr__(self, "speed_sd", ss)
+        for name in ("entry_time", "entry_time_sd"):
+            object.__setattr__(
+                self, name, _check_number(f"vehicle.{name}", getattr(self, name), nonneg=True)
+            )
         r = _check_number("vehicle.load_rel_sd", self.load_rel_sd, nonneg=True)
         if r > MAX_LOAD_REL_SD:
             raise InputError(
@@ -217,6 +260,76 @@ class Vehicle:
     def duration(self, length: float) -> float:
         """T: first axle entering to last axle leaving [s]."""
         return (length + float(self.offsets.max())) / self.speed
+
+    @property
+    def realistic(self) -> bool:
+        """Whether this vehicle needs the independent vehicle-bridge simulator (`bayespinn.vbi`): sprung
+        axles, or a recording that starts before the entry."""
+        return self.model != "forces" or self.entry_time > 0.0
+
+
+#: the Vehicle fields added for real crossings, with their defaults (left out of `Config.identity`)
+_CROSSING_DEFAULTS = {
+    "model": "forces",
+    "body_frequency": 2.5,
+    "body_damping": 0.1,
+    "speed_sd": 0.0,
+    "entry_time": 0.0,
+    "entry_time_sd": 0.0,
+}
+
+
+def _roughness(value: Any) -> float:
+    if isinstance(value, str):
+        key = value.strip().upper()
+        if key in ROAD_CLASSES:
+            return ROAD_CLASSES[key]
+        raise InputError(
+            "road.roughness", value, "Gd(n0) in m^3 >= 0 or an ISO 8608 class 'A', 'B', 'C', 'D'"
+        )
+    if isinstance(value, bool) or not isinstance(value, int | float | np.floating | np.integer):
+        raise InputError(
+            "road.roughness", value, "Gd(n0) in m^3 >= 0 or an ISO 8608 class 'A', 'B', 'C', 'D'"
+        )
+    v = float(value)
+    if not math.isfinite(v) or v < 0:
+        raise InputError(
+            "road.roughness", value, "Gd(n0) in m^3 >= 0 or an ISO 8608 class 'A', 'B', 'C', 'D'"
+        )
+    return v
+
+
+@dataclass(frozen=True)
+class Road:
+    """The road surface `simulate` drives on (ISO 8608).
+
+    roughness : Gd(n0) [m^3], the displacement PSD at n0 = 0.1 cycles/m (waviness 2); a class letter
+        "A".."D" is stored as that class's geometric-mean value (16e-6, 64e-6, 256e-6, 1024e-6 m^3)
+    approach : length of rough road before the span [m], so that a sprung vehicle arrives bouncing
+    """
+
+    roughness: float = 0.0
+    approach: float = 30.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "roughness", _roughness(self.roughness))
+        object.__setattr__(
+            self, "approach", _check_number("road.approach", self.approach, nonneg=True)
+        )
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """One crossing of a multi-crossing file: its name (the CSV's `crossing` column) and its vehicle."""
+
+    name: str
+    vehicle: Vehicle
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip() or "," in self.name:
+            raise InputError("crossing.name", self.name, "a non-empty name without commas")
+        if not isinstance(self.vehicle, Vehicle):
+            raise InputError(f"crossing {self.name}.vehicle", self.vehicle, "a Vehicle")
 
 
 @dataclass(frozen=True)
@@ -331,10 +444,23 @@ class Config:
     data: DataSpec = field(default_factory=DataSpec)
     prior: PriorSpec = field(default_factory=PriorSpec)
     model: ModelSpec = field(default_factory=ModelSpec)
+    road: Road = field(default_factory=Road)
+    #: several crossings in one file; empty: one crossing described by `vehicle`
+    crossings: tuple[Crossing, ...] = ()
 
     def __post_init__(self) -> None:
         if self.case not in CASES:
             raise InputError("--case", self.case, "one of " + ", ".join(CASES))
+        if not isinstance(self.road, Road):
+            raise InputError("[road]", self.road, "a Road")
+        cr = tuple(self.crossings)
+        if not all(isinstance(c, Crossing) for c in cr):
+            raise InputError("[[crossing]]", cr, "a list of crossing tables")
+        names = [c.name for c in cr]
+        if len(set(names)) != len(names):
+            dup = sorted(n for n in names if names.count(n) > 1)[0]
+            raise InputError("crossing.name", dup, "a name that no other crossing has")
+        object.__setattr__(self, "crossings", cr)
         for s in self.sensors:
             if not 0.0 <= s.x <= self.beam.length:
                 raise InputError(
@@ -371,7 +497,25 @@ class Config:
                 del d["prior"][k]
         if self.model == ModelSpec():
             del d["model"]
+        for k, default in _CROSSING_DEFAULTS.items():
+            if d["vehicle"][k] == default:
+                del d["vehicle"][k]
+        if self.road == Road():
+            del d["road"]
+        if not self.crossings:
+            del d["crossings"]
         return d
+
+    @property
+    def realistic(self) -> bool:
+        """Whether `simulate` needs the independent vehicle-bridge simulator (`bayespinn.vbi`): sprung
+        axles, a rough road, a recording that starts before the entry, or several crossings."""
+        return (
+            self.vehicle.realistic
+            or self.road.roughness > 0.0
+            or bool(self.crossings)
+            or any(c.vehicle.realistic for c in self.crossings)
+        )
 
     @property
     def duration(self) -> float:
@@ -410,6 +554,7 @@ class Config:
                 "speed": self.vehicle.speed,
                 "axles": [{"load": a.load, "offset": a.offset} for a in self.vehicle.axles],
                 "load_rel_sd": self.vehicle.load_rel_sd,
+                **_vehicle_extras(self.vehicle),
             },
             "data": {
                 "n_points": self.data.n_points,
@@ -419,7 +564,40 @@ class Config:
             },
             "prior": {f.name: getattr(self.prior, f.name) for f in fields(PriorSpec)},
             "model": {f.name: getattr(self.model, f.name) for f in fields(ModelSpec)},
+            **(
+                {"road": {"roughness": self.road.roughness, "approach": self.road.approach}}
+                if self.road != Road()
+                else {}
+            ),
+            **(
+                {
+                    "crossings": [
+                        {
+                            "name": c.name,
+                            "speed": c.vehicle.speed,
+                            "axles": [
+                                {"load": a.load, "offset": a.offset} for a in c.vehicle.axles
+                            ],
+                            "load_rel_sd": c.vehicle.load_rel_sd,
+                            **_vehicle_extras(c.vehicle, everything=True),
+                        }
+                        for c in self.crossings
+                    ]
+                }
+                if self.crossings
+                else {}
+            ),
         }
+
+
+def _vehicle_extras(vehicle: Vehicle, everything: bool = False) -> dict:
+    """The real-crossing fields of a vehicle for `Config.to_dict`: those off their defaults (all of them
+    with `everything`), so manifests of configurations without them read as before."""
+    return {
+        k: getattr(vehicle, k)
+        for k, default in _CROSSING_DEFAULTS.items()
+        if everything or getattr(vehicle, k) != default
+    }
 
 
 def truck_vehicle(speed: float = EXETER_SPEED, share: float = EAST_GIRDER_SHARE) -> Vehicle:
@@ -441,7 +619,9 @@ def preset(case: str = "deflection") -> Config:
 
 _SECTIONS = {
     "beam": {f.name for f in fields(Beam)} - {"EI_profile"},
-    "vehicle": {"speed", "axles", "load_rel_sd"},
+    "vehicle": {"speed", "axles", "load_rel_sd", *_CROSSING_DEFAULTS},
+    "road": {f.name for f in fields(Road)},
+    "crossing": {"name", "speed", "axles", "load_rel_sd", *_CROSSING_DEFAULTS},
     "data": {"n_points", "sample_rate", "sensors", "noise_ar1"},
     "prior": {f.name for f in fields(PriorSpec)},
     "model": {f.name for f in fields(ModelSpec)},
@@ -450,8 +630,12 @@ _SECTIONS = {
 
 def _table(doc: dict, name: str) -> dict:
     t = doc.get(name, {})
+    return _check_keys(t, name, f"[{name}]")
+
+
+def _check_keys(t: Any, name: str, label: str) -> dict:
     if not isinstance(t, dict):
-        raise InputError(f"[{name}]", t, "a TOML table")
+        raise InputError(label, t, "a TOML table")
     unknown = set(t) - _SECTIONS[name]
     if unknown:
         key = sorted(unknown)[0]
@@ -544,7 +728,33 @@ def resolve(case: str = "deflection", toml: str | Path | dict | None = None) -> 
     data = _build(DataSpec, "data", cfg.data, data_t)
     prior = _build(PriorSpec, "prior", cfg.prior, _table(doc, "prior"))
     model = _build(ModelSpec, "model", cfg.model, _table(doc, "model"))
-    return Config(case=case, beam=beam, vehicle=vehicle, data=data, prior=prior, model=model)
+    road = _build(Road, "road", cfg.road, _table(doc, "road"))
+    crossings = _crossings(doc.get("crossing", []), vehicle)
+    return Config(
+        case=case, beam=beam, vehicle=vehicle, data=data, prior=prior, model=model, road=road,
+        crossings=crossings,
+    )  # fmt: skip
+
+
+def _crossings(raw: Any, vehicle: Vehicle) -> tuple[Crossing, ...]:
+    """`[[crossing]]` tables: each crossing's full Vehicle, the keys it gives over `[vehicle]`'s."""
+    if isinstance(raw, dict):
+        raw = [raw]
+    if not isinstance(raw, list):
+        raise InputError("[[crossing]]", raw, "an array of crossing tables")
+    out = []
+    for i, t in enumerate(raw):
+        t = dict(_check_keys(t, "crossing", f"[[crossing]] {i}"))
+        name = t.pop("name", f"c{i}")
+        if not isinstance(name, str):
+            raise InputError(f"crossing[{i}].name", name, "a name (a string)")
+        try:
+            if "axles" in t:
+                t["axles"] = _axles(t["axles"])
+            out.append(Crossing(name, _build(Vehicle, f"crossing {name}", vehicle, t)))
+        except InputError as exc:
+            raise InputError(f"crossing {name}: {exc.field}", exc.value, exc.expected) from None
+    return tuple(out)
 
 
 def parse_snr(value: str | float | None, field_name: str = "--snr") -> float | None:
