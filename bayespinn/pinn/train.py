@@ -584,7 +584,7 @@ def fit(
     squeeze = (
         (lambda a: float(np.asarray(a).reshape(-1)[0])) if single else (lambda a: np.asarray(a))
     )  # noqa: E731
-    log.info(
+    log.debug(  # one line per network fit: shown with --verbose
         "PINN fit: EI = %s N m^2 (raw %s, beta factor %s) in %.1f s",
         np.round(EI, 0),
         np.round(EI_raw, 0),

@@ -396,7 +396,7 @@ def train_member(task: MemberTask) -> dict:
 
         def report(step, info):
             if t.progress and step % every == 0:
-                log.info(
+                log.debug(  # per training step: shown with --verbose
                     "[ensemble] phase %d, member %d: step %d, EI %.5g N m^2",
                     t.phase,
                     t.m,

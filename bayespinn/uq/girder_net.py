@@ -511,7 +511,7 @@ def train_fit(
                 Pd = pieces(problem, net, pts, problem.y)
             phi = solve_phi(problem, _detach(Pd), phi, sc)
         if progress and (i + 1) % max(1, settings.steps // 10) == 0:
-            log.info("[girder-pinn] step %d/%d  loss %.4g", i + 1, settings.steps, loss)
+            log.debug("[girder-pinn] step %d/%d  loss %.4g", i + 1, settings.steps, loss)
     return GirderFit(net, phi, time.perf_counter() - t0, loss)
 
 
