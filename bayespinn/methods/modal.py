@@ -30,6 +30,22 @@ class ModalMCMC(Method):
     def check(self, data, config) -> None:
         # Method.check refuses AR(1) noise for the PINN methods; with real_girders it checks nothing else,
         # and this reference describes every [model] (its girder posterior carries the AR(1) likelihood)
+        from ..crossings import check_crossings, needs_crossings
+
+        if needs_crossings(
+            config, data
+        ):  # a speed, entry time, damping or forces to infer, or crossings
+            from ..errors import InputError
+
+            check_crossings(config, data)
+            if self.settings.noise_prior != "vague":
+                raise InputError(
+                    "--noise-prior",
+                    self.settings.noise_prior,
+                    "vague for a crossing with a speed, entry time, damping or axle forces to infer, or "
+                    "several crossings (its reference integrates sigma out under the vague prior)",
+                )
+            return
         if not config.ideal:
             from ..errors import InputError
             from ..uq.girder_reference import check_segments
@@ -44,11 +60,24 @@ class ModalMCMC(Method):
                 )
 
     def infer(self, data, config, *, seed):
+        """The reference posterior: `crossings.crossings_reference` when the crossing leaves anything
+        uncertain (`crossings.needs_crossings`), else the girder reference for a real girder, else today's
+        modal posterior of (EI, sigma)."""
         from ..uq.modal_mcmc import modal_posterior
         from ..uq.priors import NoisePrior
         from ..uq.sampler import MCMCSettings
 
         s = self.settings
+        from ..crossings import crossings_reference, needs_crossings
+
+        if needs_crossings(config, data):
+            return crossings_reference(
+                data,
+                config,
+                seed=seeding.stream(seed, "emcee"),
+                settings=s.mcmc or MCMCSettings.for_profile(s.profile),
+                progress=self.progress,
+            )
         if not config.ideal:
             from ..uq.girder_reference import girder_reference
 

@@ -1,0 +1,219 @@
+"""The crossing reference's log posterior: what is shared (EI, damping, noise, the force fluctuation's scale
+and time scale) and what each crossing has of its own (speed, entry time), vectorised over walkers.
+
+Parameters live on unconstrained scales: log EI, log zeta, log v (the speed prior is log-normal with the
+stated relative sd), t0, log s, log l, log sigma. With constant axle forces the noise sd is integrated out
+under the log-uniform prior exactly (the density is prior x RSS^(-n/2), as in `uq.modal_mcmc`). With
+fluctuating forces, each axle's dynamic force P_j delta_j(tau) is a zero-mean Gaussian process whose weights
+on the force basis (`forward.basis_functions`) are integrated out exactly: y ~ N(mu, sigma^2 I + R D R^T),
+D = diag of the spectral density at the basis frequencies; the Woodbury identity keeps every solve J m x
+J m. The kernel is the second time derivative of a squared exponential (spectral density proportional to
+s^2 l (l w)^4 exp(-(l w)^2 / 2), variance s^2): a sprung body's dynamic force is its mass times an
+acceleration, so it has no power at zero frequency (it does not change the mean load over a crossing, which
+the stated axle loads and `load_rel_sd` describe) and a peak at w = 2 / l.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..uq.priors import EIPrior, NoisePrior
+from .forward import CrossingModel, basis_frequencies
+
+#: the force time scale's prior: log-normal, median FORCE_L_MEDIAN [s], log-sd FORCE_L_LOG_SD, truncated
+#: below at FORCE_L_MIN (the spectral peak 2 / l at most 2.7 Hz there, above a lorry body's bounce)
+FORCE_L_MEDIAN, FORCE_L_LOG_SD, FORCE_L_MIN = 0.3, 1.0, 0.12
+#: the fluctuation's relative scale s: log-normal, median 5 % of the axle load, log-sd 1 (weak: 90 % of
+#: the prior between 1 % and 26 %)
+FORCE_S_MEDIAN, FORCE_S_LOG_SD = 0.05, 1.0
+#: basis functions per axle: the spectrum beyond the last one holds under 0.7 % of the fluctuation's
+#: variance at the shortest time scale (u^4 exp(-u^2 / 2) beyond u = 4)
+BASIS_CUTOFF, MAX_BASIS = 4.0, 48
+
+
+def inertial_spectral_sd(alpha: np.ndarray, s: np.ndarray, ell: np.ndarray) -> np.ndarray:
+    """sqrt of S(alpha) = s^2 sqrt(2 pi) l (l alpha)^4 exp(-(l alpha)^2 / 2) / 3 (variance s^2), for
+    alpha (W, m) [rad/s] and s, l (W,)."""
+    s, ell = np.asarray(s, float)[:, None], np.asarray(ell, float)[:, None]
+    u = ell * alpha
+    return s * np.sqrt(math.sqrt(2 * math.pi) * ell / 3.0) * u**2 * np.exp(-0.25 * u * u)
+
+
+def n_basis_for(Te: float) -> int:
+    """Basis functions per axle for an axle time on the span Te [s] (`BASIS_CUTOFF`, `MAX_BASIS`)."""
+    Lh = 1.5 * Te / 2.0
+    return int(min(MAX_BASIS, math.ceil(BASIS_CUTOFF * 2.0 * Lh / (math.pi * FORCE_L_MIN))))
+
+
+@dataclass
+class CrossingTerm:
+    """One crossing's share of the likelihood: its rows' values, its model and its stated vehicle."""
+
+    name: str
+    rows: np.ndarray
+    y: np.ndarray
+    model: CrossingModel
+    speed: float
+    speed_sd: float
+    entry_time: float
+    entry_time_sd: float
+
+
+class Layout:
+    """Which columns of theta hold which parameter: shared ones first, then each crossing's."""
+
+    def __init__(self, terms: list[CrossingTerm], damping: bool, forces: bool):
+        names = ["log_EI"]
+        if damping:
+            names.append("log_zeta")
+        if forces:
+            names += ["log_s", "log_l", "log_sigma"]
+        for c in terms:
+            if c.speed_sd > 0:
+                names.append(f"log_v[{c.name}]")
+            if c.entry_time_sd > 0:
+                names.append(f"t0[{c.name}]")
+        self.names = names
+        self.index = {n: i for i, n in enumerate(names)}
+        self.dim = len(names)
+
+    def col(self, theta: np.ndarray, name: str, default: float) -> np.ndarray:
+        i = self.index.get(name)
+        return np.full(theta.shape[0], default) if i is None else theta[:, i]
+
+
+class CrossingsLogPosterior:
+    """log p(theta | data) up to a constant, theta (W, D) -> (W,); -inf outside the priors' support."""
+
+    def __init__(
+        self,
+        terms: list[CrossingTerm],
+        ei_prior: EIPrior,
+        noise_prior: NoisePrior,
+        *,
+        zeta_known: float,
+        damping_prior: tuple[float, float] | None,
+        forces: bool,
+    ):
+        self.terms, self.ei_prior, self.noise_prior = terms, ei_prior, noise_prior
+        self.zeta_known, self.damping_prior, self.forces = zeta_known, damping_prior, forces
+        self.layout = Layout(terms, damping_prior is not None, forces)
+        self.n = int(sum(c.y.size for c in terms))
+
+    def unpack(self, theta: np.ndarray) -> dict:
+        """Physical parameters by name: EI, zeta, s, l, sigma (W,), and per crossing v, t0 lists."""
+        th = np.atleast_2d(theta)
+        L = self.layout
+        out = {
+            "EI": np.exp(th[:, 0]),
+            "zeta": np.exp(L.col(th, "log_zeta", math.log(max(self.zeta_known, 1e-300)))),
+            "v": [np.exp(L.col(th, f"log_v[{c.name}]", math.log(c.speed))) for c in self.terms],
+            "t0": [L.col(th, f"t0[{c.name}]", c.entry_time) for c in self.terms],
+        }
+        if self.damping_prior is None:
+            out["zeta"] = np.full(th.shape[0], self.zeta_known)
+        if self.forces:
+            out["s"] = np.exp(th[:, L.index["log_s"]])
+            out["l"] = np.exp(th[:, L.index["log_l"]])
+            out["sigma"] = np.exp(th[:, L.index["log_sigma"]])
+        return out
+
+    def log_prior(self, theta: np.ndarray) -> np.ndarray:
+        th = np.atleast_2d(theta)
+        L = self.layout
+        lp = self.ei_prior.logpdf(th[:, 0])
+        lp = np.where(np.abs(th[:, 0] - self.ei_prior.loc) < 12 * self.ei_prior.log_sd, lp, -np.inf)
+        if self.damping_prior is not None:
+            med, sd = self.damping_prior
+            lz = th[:, L.index["log_zeta"]]
+            lp = lp + _normal(lz, math.log(med), sd)
+            lp = np.where(lz < math.log(0.5), lp, -np.inf)  # below half of critical
+        if self.forces:
+            lp = lp + _normal(th[:, L.index["log_s"]], math.log(FORCE_S_MEDIAN), FORCE_S_LOG_SD)
+            ll = th[:, L.index["log_l"]]
+            lp = lp + np.where(
+                ll >= math.log(FORCE_L_MIN),
+                _normal(ll, math.log(FORCE_L_MEDIAN), FORCE_L_LOG_SD),
+                -np.inf,
+            )
+            lp = lp + self.noise_prior.logpdf(th[:, L.index["log_sigma"]])
+        for c in self.terms:
+            if c.speed_sd > 0:
+                lp = lp + _normal(th[:, L.index[f"log_v[{c.name}]"]], math.log(c.speed), c.speed_sd)
+            if c.entry_time_sd > 0:
+                lp = lp + _normal(th[:, L.index[f"t0[{c.name}]"]], c.entry_time, c.entry_time_sd)
+        return lp
+
+    def residuals(self, theta: np.ndarray, *, basis: bool = False):
+        """Per crossing: residuals y - mu (W, n_c) and, with basis, the basis responses (W, n_c, M)
+        scaled by the spectral sd (R D^(1/2))."""
+        p = self.unpack(theta)
+        out = []
+        for i, c in enumerate(self.terms):
+            if basis and self.forces:
+                mu, R = c.model.responses(p["EI"], p["zeta"], p["v"][i], p["t0"][i], basis=True)
+                alpha, _, _ = basis_frequencies(c.model.L / p["v"][i], c.model.n_basis)
+                d = inertial_spectral_sd(alpha, p["s"], p["l"])  # (W, m), the same for every axle
+                R = R * np.tile(d, (1, c.model.loads.size))[:, None, :]
+                out.append((c.y[None, :] - mu, R))
+            else:
+                mu = c.model.predict(p["EI"], p["zeta"], p["v"][i], p["t0"][i])
+                out.append((c.y[None, :] - mu, None))
+        return out
+
+    def loglik(self, theta: np.ndarray) -> np.ndarray:
+        """The log-likelihood (constant forces: sigma integrated out, up to a constant)."""
+        th = np.atleast_2d(theta)
+        parts = self.residuals(th, basis=self.forces)
+        if not self.forces:
+            rss = sum(np.einsum("wp,wp->w", r, r) for r, _ in parts)
+            return -0.5 * self.n * np.log(rss)
+        sig2 = np.exp(2 * th[:, self.layout.index["log_sigma"]])
+        out = -0.5 * self.n * (np.log(2 * math.pi) + np.log(sig2))
+        for r, B in parts:
+            out = out + woodbury_loglik(r, B, sig2)
+        return out
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        th = np.atleast_2d(theta)
+        lp = self.log_prior(th)
+        out = np.full(th.shape[0], -np.inf)
+        ok = np.isfinite(lp)
+        if ok.any():
+            out[ok] = lp[ok] + self.loglik(th[ok])
+        return out
+
+    def force_weights(self, theta: np.ndarray) -> list[np.ndarray]:
+        """The posterior mean of each crossing's basis weights given theta (one row): the force
+        fluctuation's conditional mean, (M,) per crossing, in units where the force basis is R D^(1/2)."""
+        th = np.atleast_2d(theta)[:1]
+        sig2 = float(np.exp(2 * th[0, self.layout.index["log_sigma"]]))
+        out = []
+        for r, B in self.residuals(th, basis=True):
+            B0, r0 = B[0], r[0]
+            A = B0.T @ B0 + sig2 * np.eye(B0.shape[1])
+            out.append(np.linalg.solve(A, B0.T @ r0))
+        return out
+
+
+def woodbury_loglik(r: np.ndarray, B: np.ndarray, sig2: np.ndarray) -> np.ndarray:
+    """-(1/2) [log det(I + B'B / sigma^2) + r'(sigma^2 I + B B')^(-1) r], r (W, n), B (W, n, M), sigma^2
+    (W,), without the n log(2 pi sigma^2) / 2 that the caller adds."""
+    W, _, M = B.shape
+    G = np.matmul(np.transpose(B, (0, 2, 1)), B)  # (W, M, M)
+    b = np.einsum("wnm,wn->wm", B, r)
+    A = G / sig2[:, None, None] + np.eye(M)[None]
+    C = np.linalg.cholesky(A)
+    logdet = 2.0 * np.sum(np.log(np.diagonal(C, axis1=1, axis2=2)), axis=1)
+    z = np.linalg.solve(C, (b / np.sqrt(sig2)[:, None])[:, :, None])[
+        :, :, 0
+    ]  # |z|^2 = b'A^-1 b / s2
+    quad = (np.einsum("wn,wn->w", r, r) - np.einsum("wm,wm->w", z, z)) / sig2
+    return -0.5 * (logdet + quad)
+
+
+def _normal(x: np.ndarray, mean: float, sd: float) -> np.ndarray:
+    return -0.5 * ((np.asarray(x) - mean) / sd) ** 2 - math.log(sd * math.sqrt(2 * math.pi))

@@ -1,0 +1,446 @@
+"""The modal reference for real crossings: EI with what a recording leaves uncertain (the speed, the entry
+time on the data's clock, the damping ratio, the axles' dynamic forces), one or several crossings.
+
+`crossings_reference(data, cfg, seed=...)` finds the maximum of the posterior (EI profiled on a grid at the
+stated values, then least squares with the priors as pseudo-observations), takes a Laplace scale from a
+finite-difference Hessian, and runs emcee (`uq.sampler.sample`, the reference's driver) on every inferred
+parameter at once. With constant forces the noise sd is integrated out and drawn afterwards from its exact
+inverse-gamma conditional; with fluctuating forces it is sampled with the force fluctuation's scale and time
+scale. EI, damping, noise and the fluctuation's law are shared by all crossings; speed and entry time are
+each crossing's own.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares, minimize
+
+from .. import seeding
+from ..config import Config
+from ..data.measurements import Measurements
+from ..errors import InputError
+from ..uq.posterior import Posterior, mcmc_diagnostics, summarise
+from ..uq.priors import EIPrior, NoisePrior
+from ..uq.sampler import ESS_MIN, RHAT_MAX, MCMCSettings, sample
+from .forward import CrossingModel
+from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_basis_for
+
+#: modal truncation below this fraction of the noise sd (as `uq.modal_mcmc`)
+TRUNCATION_FRACTION = 0.01
+#: modes carried by the predictor (reports, fit check)
+PREDICT_MODES = 24
+
+
+def needs_crossings(cfg: Config, data: Measurements | None = None) -> bool:
+    """Whether the analysis declares anything the crossing reference infers: a speed or entry-time sd, an
+    entry time other than 0, inferred damping, fluctuating axle forces, or several crossings."""
+    vehicles = [cfg.vehicle] + [c.vehicle for c in cfg.crossings]
+    several = len(cfg.crossings) > 1 or (
+        data is not None and data.crossing is not None and len(set(data.crossing)) > 1
+    )
+    return (
+        several
+        or cfg.model.damping == "inferred"
+        or cfg.model.axle_forces == "fluctuating"
+        or any(v.speed_sd > 0 or v.entry_time_sd > 0 or v.entry_time != 0 for v in vehicles)
+    )
+
+
+def check_crossings(cfg: Config, data: Measurements) -> None:
+    """Refuse what the crossing reference does not describe yet, one line naming the key."""
+    m = cfg.model
+    why = "with a speed, entry time, damping or axle forces to infer, or several crossings, yet"
+    if m.EI_segments != 1:
+        raise InputError(
+            "model.EI_segments", m.EI_segments, f"1 (EI per segment is not supported {why})"
+        )
+    if m.supports != "pinned":
+        raise InputError(
+            "model.supports", m.supports, f"'pinned' (springs are not supported {why})"
+        )
+    if m.noise != "iid":
+        raise InputError("model.noise", m.noise, f"'iid' (AR(1) noise is not supported {why})")
+    if m.EI_field != "segments":
+        raise InputError(
+            "model.EI_field", m.EI_field, f"'segments' (a smooth EI field is not supported {why})"
+        )
+    if cfg.infers_load_factor or any(c.vehicle.load_rel_sd > 0 for c in cfg.crossings):
+        raise InputError(
+            "vehicle.load_rel_sd",
+            cfg.vehicle.load_rel_sd,
+            f"0 (an uncertain load factor is not supported {why})",
+        )
+    if not cfg.beam.ideal:
+        raise InputError("beam.EI", list(cfg.beam.segments), f"one EI and pinned supports {why}")
+    split_crossings(cfg, data)
+
+
+def split_crossings(cfg: Config, data: Measurements) -> list[tuple[str, np.ndarray, object]]:
+    """(name, row indices, vehicle) per crossing: the [[crossing]] tables matched to the data's `crossing`
+    column, or the whole file as one crossing of [vehicle]."""
+    col = data.crossing
+    if not cfg.crossings:
+        if col is not None and len(set(col)) > 1:
+            raise InputError(
+                "[[crossing]]",
+                "none",
+                f"a table per crossing in the data ({', '.join(data.crossing_names)})",
+            )
+        name = str(col[0]) if col is not None and len(col) else "crossing"
+        return [(name, np.arange(len(data)), cfg.vehicle)]
+    if col is None:
+        if len(cfg.crossings) == 1:
+            return [(cfg.crossings[0].name, np.arange(len(data)), cfg.crossings[0].vehicle)]
+        raise InputError(
+            "data crossing column",
+            "missing",
+            "a crossing name per row for several [[crossing]] tables",
+        )
+    names = {c.name for c in cfg.crossings}
+    unknown = sorted(set(map(str, col)) - names)
+    if unknown:
+        raise InputError(
+            "data crossing column",
+            unknown[0],
+            "one of the [[crossing]] names " + ", ".join(sorted(names)),
+        )
+    out = []
+    for c in cfg.crossings:
+        rows = np.flatnonzero(col == c.name)
+        if rows.size == 0:
+            raise InputError(f"[[crossing]] {c.name}", c.name, "a crossing with rows in the data")
+        out.append((c.name, rows, c.vehicle))
+    return out
+
+
+def _terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[CrossingTerm]:
+    a_u, a_xx = data.weights
+    out = []
+    for name, rows, veh in split_crossings(cfg, data):
+        nb = n_basis_for(cfg.beam.length / veh.speed) if forces else 0
+        model = CrossingModel(
+            cfg.beam.length, cfg.beam.mass_per_length, veh.loads, veh.offsets,
+            data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
+            basis_modes=min(n_modes, 6),
+        )  # fmt: skip
+        out.append(
+            CrossingTerm(
+                name,
+                rows,
+                np.asarray(data.value, float)[rows],
+                model,
+                veh.speed,
+                veh.speed_sd,
+                veh.entry_time,
+                veh.entry_time_sd,
+            )  # fmt: skip
+        )
+    return out
+
+
+def _start(post: CrossingsLogPosterior, cfg: Config) -> np.ndarray:
+    """The stated values, with log EI the best of a grid over the prior (the other parameters stated)."""
+    L = post.layout
+    th = np.zeros(L.dim)
+    for c in post.terms:
+        if f"log_v[{c.name}]" in L.index:
+            th[L.index[f"log_v[{c.name}]"]] = math.log(c.speed)
+        if f"t0[{c.name}]" in L.index:
+            th[L.index[f"t0[{c.name}]"]] = c.entry_time
+    if "log_zeta" in L.index:
+        th[L.index["log_zeta"]] = math.log(cfg.prior.damping_median)
+    grid = post.ei_prior.loc + post.ei_prior.log_sd * np.linspace(-5, 5, 401)
+    cand = np.repeat(th[None], grid.size, 0)
+    cand[:, 0] = grid
+    prof = np.concatenate(
+        [_rss_profile(post, c) for c in np.array_split(cand, max(1, grid.size // 32))]
+    ) + post.ei_prior.logpdf(grid)
+    th[0] = grid[int(np.argmax(prof))]
+    return th
+
+
+def _rss_profile(post: CrossingsLogPosterior, theta: np.ndarray) -> np.ndarray:
+    rss = sum(np.einsum("wp,wp->w", r, r) for r, _ in post.residuals(theta))
+    return -0.5 * post.n * np.log(rss)
+
+
+def _least_squares(post: CrossingsLogPosterior, th0: np.ndarray) -> tuple[np.ndarray, float]:
+    """The constant-force parameters' maximum (Gauss-Newton on residuals / sigma and the priors as
+    pseudo-residuals, sigma from the fit), and sigma there."""
+    idx = [i for i, n in enumerate(post.layout.names) if n not in ("log_s", "log_l", "log_sigma")]
+    base = th0.copy()
+
+    def full(z: np.ndarray) -> np.ndarray:
+        th = np.repeat(base[None], z.shape[0], 0)
+        th[:, idx] = z
+        return th
+
+    sigma = 1.0
+    for _ in range(2):  # sigma from the fit, then the fit with that sigma
+        rss = sum(float(np.sum(r**2)) for r, _ in post.residuals(full(th0[idx][None])))
+        sigma = math.sqrt(rss / post.n)
+
+        def fun(z, sigma=sigma):
+            th = full(np.atleast_2d(z))
+            r = np.concatenate([r for r, _ in post.residuals(th)], axis=1)[0] / sigma
+            return np.concatenate([r, _prior_residuals(post, th[0])])
+
+        def jac(z, sigma=sigma):
+            h = 1e-6 * np.maximum(1.0, np.abs(z))
+            Z = np.repeat(np.atleast_2d(z), 2 * z.size, 0)
+            for i in range(z.size):
+                Z[2 * i, i] += h[i]
+                Z[2 * i + 1, i] -= h[i]
+            th = full(Z)
+            R = np.concatenate([r for r, _ in post.residuals(th)], axis=1) / sigma
+            P = np.stack([_prior_residuals(post, t) for t in th])
+            F = np.concatenate([R, P], axis=1)
+            return ((F[0::2] - F[1::2]) / (2 * h[:, None])).T
+
+        fit = least_squares(
+            fun, th0[idx], jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=200
+        )
+        th0 = th0.copy()
+        th0[idx] = fit.x
+    return th0, sigma
+
+
+def _prior_residuals(post: CrossingsLogPosterior, th: np.ndarray) -> np.ndarray:
+    """sqrt(-2 log prior) terms of the normal priors on the constant-force parameters (pseudo-residuals)."""
+    L = post.layout
+    out = [(th[0] - post.ei_prior.loc) / post.ei_prior.log_sd]
+    if "log_zeta" in L.index:
+        med, sd = post.damping_prior
+        out.append((th[L.index["log_zeta"]] - math.log(med)) / sd)
+    for c in post.terms:
+        if f"log_v[{c.name}]" in L.index:
+            out.append((th[L.index[f"log_v[{c.name}]"]] - math.log(c.speed)) / c.speed_sd)
+        if f"t0[{c.name}]" in L.index:
+            out.append((th[L.index[f"t0[{c.name}]"]] - c.entry_time) / c.entry_time_sd)
+    return np.array(out)
+
+
+def _hessian_scale(post: CrossingsLogPosterior, th: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Laplace sds of the parameters at the maximum: sqrt of the diagonal of the inverse finite-difference
+    Hessian of -log p (all points in one vectorised call); the steps h where that is not positive definite."""
+    D = th.size
+    pts = [th]
+    for i in range(D):
+        for j in range(i, D):
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                p = th.copy()
+                p[i] += si * h[i]
+                p[j] += sj * h[j]
+                pts.append(p)
+    f = -post(np.array(pts))
+    H = np.zeros((D, D))
+    k = 1
+    for i in range(D):
+        for j in range(i, D):
+            fpp, fpm, fmp, fmm = f[k : k + 4]
+            k += 4
+            H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
+    try:
+        cov = np.linalg.inv(H)
+        sd = np.sqrt(np.diag(cov))
+        if np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0):
+            return sd
+    except np.linalg.LinAlgError:
+        pass
+    return h
+
+
+@dataclass
+class CrossingsReference(Posterior):
+    """The crossing reference's `Posterior`: EI and sigma draws, and the nuisances' draws (`nuisance`:
+    damping_ratio, axle_force_sd, axle_force_time_scale (chain, draw); per crossing speed and entry_time)."""
+
+    nuisance: dict = field(default_factory=dict, repr=False, compare=False)
+    crossing_names: tuple = ()
+
+    def summary(self, truth: dict | None = None) -> dict:
+        out = super().summary(truth)
+        t = truth or {}
+        nz = self.nuisance
+        for key in ("damping_ratio", "axle_force_sd", "axle_force_time_scale"):
+            if key in nz:
+                out[key] = _summarise(nz[key], t.get(key))
+        per = nz.get("crossings", {})
+        if len(self.crossing_names) == 1:
+            for key, d in per.get(self.crossing_names[0], {}).items():
+                out[key] = _summarise(d, t.get(key))
+        elif self.crossing_names:
+            tc = t.get("crossings") or {}
+            cross = {}
+            for name in self.crossing_names:
+                e = {
+                    k: summarise(d, (tc.get(name) or {}).get(k))
+                    for k, d in per.get(name, {}).items()
+                }
+                fc = (self.info.get("crossing_fit_checks") or {}).get(name)
+                if fc is not None:
+                    e["fit_check"] = fc
+                cross[name] = e
+            out["crossings"] = cross
+        out.pop("crossing_fit_checks", None)
+        return out
+
+
+def _choose_modes(cfg, data, post_of, th, sigma, start: int = 8, cap: int = 64):
+    """The smallest mode count whose predictions at th differ from twice as many by at most
+    TRUNCATION_FRACTION x sigma (a floor of 1e-9 of the data's RMS for clean data)."""
+    scale = float(np.sqrt(np.mean(np.asarray(data.value, float) ** 2)))
+    tol = max(TRUNCATION_FRACTION * sigma, 1e-9 * scale)
+    n = start
+    while True:
+        p1 = np.concatenate([r for r, _ in post_of(n).residuals(th[None])], axis=1)
+        p2 = np.concatenate([r for r, _ in post_of(2 * n).residuals(th[None])], axis=1)
+        err = float(np.max(np.abs(p1 - p2)))
+        if err <= tol or n >= cap:
+            return n, err
+        n *= 2
+
+
+def crossings_reference(
+    data: Measurements,
+    cfg: Config,
+    *,
+    seed: int | np.random.SeedSequence = 0,
+    settings: MCMCSettings | None = None,
+    progress: bool = False,
+    fit_checks: bool = True,
+) -> CrossingsReference:
+    """The reference posterior of EI and of what the crossings leave uncertain (module docstring)."""
+    from .predictor import CrossingsPredictor, crossing_fit_checks
+
+    t_start = time.perf_counter()
+    check_crossings(cfg, data)
+    s = settings or MCMCSettings()
+    m = cfg.model
+    forces = m.axle_forces == "fluctuating"
+    damping = (
+        (cfg.prior.damping_median, cfg.prior.damping_log_sd) if m.damping == "inferred" else None
+    )
+    ei_prior = EIPrior.from_spec(cfg.prior)
+    noise = NoisePrior.build("vague", np.asarray(data.value, float))
+
+    def post_of(n_modes: int) -> CrossingsLogPosterior:
+        return CrossingsLogPosterior(
+            _terms(cfg, data, n_modes, forces), ei_prior, noise,
+            zeta_known=cfg.beam.damping_ratio, damping_prior=damping, forces=forces,
+        )  # fmt: skip
+
+    post = post_of(8)
+    th = _start(post, cfg)
+    th, sigma = _least_squares(post, th)
+    n_modes, trunc = _choose_modes(cfg, data, post_of, th, sigma)
+    if n_modes != 8:
+        post = post_of(n_modes)
+        th, sigma = _least_squares(post, th)
+    rss = sum(float(np.sum(r**2)) for r, _ in post.residuals(th[None]))
+    sigma = math.sqrt(rss / post.n)
+    L = post.layout
+    if forces:  # the fluctuation's parameters from the priors' medians, then the whole maximum
+        th[L.index["log_s"]] = math.log(0.5 * 0.05)
+        th[L.index["log_l"]] = math.log(FORCE_L_MEDIAN)
+        th[L.index["log_sigma"]] = math.log(sigma)
+        res = minimize(
+            lambda z: -float(post(z[None])[0]), th, method="Nelder-Mead",
+            options={"maxiter": 150 * L.dim, "xatol": 1e-6, "fatol": 1e-3},
+        )  # fmt: skip
+        if np.isfinite(res.fun) and res.fun < -float(post(th[None])[0]):
+            th = res.x
+    h = np.array([_step(n, post) for n in L.names])
+    scale = _hessian_scale(post, th, h)
+    ch = sample(post, th, scale, s, seed, progress, desc="crossing MCMC")
+    draws = ch.draws  # (chain, draw, D)
+    flat = draws.reshape(-1, L.dim)
+    par = post.unpack(flat)
+    shape = draws.shape[:2]
+    EI = par["EI"].reshape(shape)
+    if forces:
+        sig = par["sigma"].reshape(shape)
+        scheme = (
+            "emcee on every inferred parameter; axle-force fluctuations integrated out (Woodbury)"
+        )
+    else:  # lp = log prior - (n/2) log RSS: RSS back from it, then sigma^2 | rest ~ InvGamma(n/2, RSS/2)
+        rss_d = np.exp((post.log_prior(flat) - ch.lp.ravel()) * (2.0 / post.n))
+        g = np.random.default_rng(seeding.stream(seed, "noise")).gamma(
+            post.n / 2.0, 1.0, rss_d.size
+        )
+        sig = np.clip(np.sqrt(rss_d / (2.0 * g)), noise.low, noise.high).reshape(shape)
+        scheme = (
+            "emcee on every inferred parameter, sigma marginalised; exact inverse-gamma sigma draws"
+        )
+    nuisance: dict = {"crossings": {}}
+    if damping is not None:
+        nuisance["damping_ratio"] = par["zeta"].reshape(shape)
+    if forces:
+        nuisance["axle_force_sd"] = par["s"].reshape(shape)
+        nuisance["axle_force_time_scale"] = par["l"].reshape(shape)
+    for i, c in enumerate(post.terms):
+        e = {}
+        if c.speed_sd > 0:
+            e["speed"] = par["v"][i].reshape(shape)
+        if c.entry_time_sd > 0:
+            e["entry_time"] = par["t0"][i].reshape(shape)
+        nuisance["crossings"][c.name] = e
+    diag = {}
+    for n in L.names:
+        d = mcmc_diagnostics(draws[:, :, L.index[n]])
+        if not diag or d["rhat"] > diag["rhat"]:
+            diag.update(rhat=d["rhat"])
+        for k in ("ess_bulk", "ess_tail"):
+            diag[k] = min(diag.get(k, math.inf), d[k])
+    converged = bool(
+        diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN and diag["ess_tail"] >= ESS_MIN
+    )
+    if not converged:
+        warnings.warn(
+            f"crossing MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+    diag.update(
+        converged=converged, tau=ch.tau, steps=ch.steps, walkers=s.n_walkers * s.n_groups,
+        acceptance=ch.acceptance, n_modes=n_modes, truncation_error=trunc,
+        force_basis=[c.model.n_basis for c in post.terms] if forces else 0,
+        parameters=list(L.names), noise_prior=noise.describe(), scheme=scheme,
+        diagnostics_over="the worst of every sampled parameter",
+    )  # fmt: skip
+    mean_th = flat.mean(axis=0)
+    info = {"map": {n: float(v) for n, v in zip(L.names, th, strict=True)}}
+    predictor = CrossingsPredictor(cfg, data, post, flat, mean_th)
+    out = CrossingsReference(
+        "modal_mcmc", EI, sig, diagnostics=diag, info=info, predictor=predictor,
+        sample_stats={"lp": ch.lp, "acceptance": ch.walker_acceptance},
+        nuisance=nuisance, crossing_names=tuple(c.name for c in post.terms),
+    )  # fmt: skip
+    if fit_checks and len(post.terms) > 1:
+        out.info["crossing_fit_checks"] = crossing_fit_checks(out, data, cfg, post)
+    out.runtime_s = time.perf_counter() - t_start
+    return out
+
+
+def _summarise(draws, truth) -> dict:
+    """`uq.posterior.summarise`, with the absolute error `error` beside rel_error_pct (which a truth of 0,
+    such as an entry time, has not)."""
+    if truth is None:
+        return summarise(draws)
+    out = summarise(draws, truth if truth != 0 else None)
+    out["error"] = out["mean"] - float(truth)
+    return out
+
+
+def _step(name: str, post: CrossingsLogPosterior) -> float:
+    """Finite-difference step of each parameter for the Laplace scale."""
+    if name.startswith("t0["):
+        return 1e-4
+    if name.startswith("log_v["):
+        return 1e-5
+    return {"log_EI": 1e-4, "log_zeta": 1e-2, "log_s": 1e-2, "log_l": 1e-2, "log_sigma": 1e-3}[name]
