@@ -16,7 +16,7 @@ from ..errors import InputError
 
 KINDS = ("deflection", "strain")
 REQUIRED = ("x", "t", "value", "kind")
-OPTIONAL = ("y", "sensor", "value_true")
+OPTIONAL = ("y", "sensor", "value_true", "crossing")
 
 
 @dataclass(frozen=True)
@@ -26,12 +26,15 @@ class Measurements:
     Attributes
     ----------
     x : array (P,), sensor position along the span [m]
-    t : array (P,), time since the first axle entered [s]
+    t : array (P,), time on the data's clock [s] (since the first axle entered, unless the vehicle's
+        entry_time says when it did)
     value : array (P,), measured deflection [m] (positive down) or strain [-]
     kind : array (P,) of str, 'deflection' or 'strain'
     y : array (P,), fibre distance from the neutral axis [m] (+ down); NaN on deflection rows
     sensor : array (P,) of str, sensor name ('' when unnamed)
     value_true : array (P,) or None, the noise-free value of a synthetic file
+    crossing : array (P,) of str or None, the crossing each row belongs to (a file of several
+        crossings); None: the file is one crossing
     """
 
     x: np.ndarray
@@ -41,6 +44,7 @@ class Measurements:
     y: np.ndarray
     sensor: np.ndarray
     value_true: np.ndarray | None = None
+    crossing: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.x.size)
@@ -64,6 +68,7 @@ class Measurements:
     def select(self, mask: np.ndarray) -> Measurements:
         """The rows where mask is true."""
         vt = None if self.value_true is None else self.value_true[mask]
+        cr = None if self.crossing is None else self.crossing[mask]
         return Measurements(
             self.x[mask],
             self.t[mask],
@@ -72,7 +77,16 @@ class Measurements:
             self.y[mask],
             self.sensor[mask],
             vt,
+            cr,
         )
+
+    @property
+    def crossing_names(self) -> tuple[str, ...]:
+        """The crossings in the order they first appear (empty when the file is one crossing)."""
+        if self.crossing is None:
+            return ()
+        _, first = np.unique(self.crossing, return_index=True)
+        return tuple(str(self.crossing[i]) for i in sorted(first))
 
     def with_values(self, value: np.ndarray) -> Measurements:
         """The same rows with new measured values (e.g. a perturbed copy)."""
@@ -84,6 +98,7 @@ class Measurements:
             self.y,
             self.sensor,
             self.value_true,
+            self.crossing,
         )
 
     def to_csv(self, path: str | Path) -> None:
@@ -92,6 +107,7 @@ class Measurements:
             list(REQUIRED)
             + ["y", "sensor"]
             + (["value_true"] if self.value_true is not None else [])
+            + (["crossing"] if self.crossing is not None else [])
         )
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
@@ -107,6 +123,8 @@ class Measurements:
             row.append(self.sensor[i])
             if self.value_true is not None:
                 row.append(repr(float(self.value_true[i])))
+            if self.crossing is not None:
+                row.append(self.crossing[i])
             w.writerow(row)
         atomic_write_text(path, buf.getvalue())
 
@@ -226,6 +244,12 @@ def read_csv(path: str | Path, length: float | None = None) -> Measurements:
         cols["y"].append(y)
         cols["sensor"].append(cell.get("sensor", ""))
         cols["value_true"].append(_float(vt, r, "value_true", name) if vt else math.nan)
+        if "crossing" in cell:
+            if cell["crossing"] == "":
+                raise InputError(
+                    f"{name} row {r}, column crossing", "", "the name of the row's crossing"
+                )
+            cols["crossing"].append(cell["crossing"])
     vt = np.array(cols["value_true"])
     return Measurements(
         x=np.array(cols["x"]),
@@ -235,4 +259,7 @@ def read_csv(path: str | Path, length: float | None = None) -> Measurements:
         y=np.array(cols["y"]),
         sensor=np.array(cols["sensor"], dtype=object).astype(str),
         value_true=None if np.isnan(vt).any() else vt,
+        crossing=np.array(cols["crossing"], dtype=object).astype(str)
+        if "crossing" in pos
+        else None,
     )

@@ -156,7 +156,15 @@ def simulate(
 
     The truth is the girder `cfg.beam` describes (EI per segment, springs at the supports) under the stated
     axles times the crossing's true load factor (`true_load_factor`); the noise is white, or AR(1) with
-    `data.noise_ar1` along each sensor's series (`ar1_noise`), with the sd that gives `snr_db`."""
+    `data.noise_ar1` along each sensor's series (`ar1_noise`), with the sd that gives `snr_db`.
+
+    Realistic crossings (`cfg.realistic`: sprung axles, a rough road, a recording that starts before the
+    entry, or several `[[crossing]]` tables) come from the independent vehicle-bridge simulator
+    (`bayespinn.vbi.simulate`, its own discretisation and time integration; `fe` does not apply)."""
+    if cfg.realistic:
+        from ..vbi import simulate as vbi_simulate
+
+        return vbi_simulate(cfg, snr_db, seed)
     layout = sample_layout(cfg, seed)
     vt = true_values(cfg, layout, fe, true_load_factor(cfg, seed))
     sigma = sigma_for_snr(vt, snr_db)
