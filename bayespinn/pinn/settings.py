@@ -6,7 +6,7 @@
   squares at every step, `varpro`); an output layer that also carries the exact quasi-static deflection
   of the Gaussian loads and the free vibrations of the first three modes started at each axle event
   (`enrich`), each with its own free coefficient; the PDE residual in units of P / L (not of the
-  Gaussian's peak); beta = 0.01 L; 600 Adam steps on a cosine schedule with resampled points (1200 before issue 25:
+  Gaussian's peak); beta = 0.01 L; 600 Adam steps on a cosine schedule with resampled points (1200 in an earlier profile:
   on the Exeter girder at 10 dB and on the 4-axle bridge 9 of the family, halving them moved the
   ensemble's EI mean by 0.15 and 0.04 reference sd and its sd by 5 % and 1 %; the family study scores the
   600-step profile on bridges it was never tuned on).
