@@ -191,3 +191,36 @@ def test_forces_model_is_constant_forces_whatever_the_road():
     # the sprung axles on a class C road: dynamic forces of several percent, mean still the static
     dyn = sprung.force / cfg.vehicle.loads - 1.0
     assert 0.01 < np.std(dyn) < 0.5 and abs(np.mean(dyn)) < 0.02
+
+
+@pytest.mark.slow
+def test_real_girder_matches_the_analysis_girder_fe():
+    """Segment EI (a 30 % softer fourth fifth) and bearing springs (5e8 N m/rad left, clamped right),
+    constant forces: within 0.1 % RMS (deflection) and 0.3 % (strain) of the analysis' own girder FE
+    (physics.girder via data.synthetic); the same girder without its springs is far off."""
+    doc = {
+        "beam": {
+            "EI": [1.03361e9, 1.03361e9, 1.03361e9, 7.2353e8, 1.03361e9],
+            "rotational_stiffness": [5e8, "fixed"],
+        }
+    }
+    s = VBISettings(n_elements=100, n_steps=8000)
+    for case, tol in (("deflection", 1e-3), ("strain", 3e-3)):
+        cfg = bp.resolve(case, doc)
+        truth = fe_simulate(cfg, None, seed=1).value_true
+        assert rel_rms(simulate(cfg, None, seed=1, settings=s).value_true, truth) < tol
+        pinned = replace(cfg, beam=replace(cfg.beam, rotational_stiffness=(0.0, 0.0)))
+        assert rel_rms(simulate(pinned, None, seed=1, settings=s).value_true, truth) > 10 * tol
+
+
+def test_beam_frequencies_and_rayleigh_damping():
+    beam = Beam(damping_ratio=0.02)
+    sb = SimBeam(beam, 48)
+    assert sb.omega[0] == pytest.approx(beam.natural_frequency(1), rel=1e-6)
+    assert sb.omega[1] == pytest.approx(beam.natural_frequency(2), rel=1e-5)
+    a, b = sb.rayleigh
+    for w in sb.omega:
+        assert a / (2 * w) + b * w / 2 == pytest.approx(0.02, rel=1e-12)
+    # clamping both ends raises the first frequency by (4.730 / pi)^2
+    clamped = SimBeam(replace(beam, rotational_stiffness=(math.inf, math.inf)), 48)
+    assert clamped.omega[0] / sb.omega[0] == pytest.approx((4.730041 / math.pi) ** 2, rel=1e-5)
