@@ -74,6 +74,9 @@ class Method:
     #: whether the method describes real girders: EI per segment, springs at the supports and an uncertain
     #: load factor (`[model]`); a method that does not is refused such a configuration by `check`
     real_girders: ClassVar[bool] = False
+    #: whether the method infers what a real crossing leaves uncertain (speed, entry time, damping, axle
+    #: forces; several crossings); a method that does not is refused such a configuration by `check`
+    real_crossings: ClassVar[bool] = False
 
     def __init__(self, settings=None, *, progress: bool = False, executor=None, **fields):
         if settings is None:
@@ -108,6 +111,10 @@ class Method:
             raise InputError(
                 "model.noise", m.noise, "'iid' (the AR(1) likelihood is not built yet: issue 23)"
             )
+        if not self.real_crossings:  # a speed, entry time, damping or forces to infer, or crossings
+            from ..crossings import refuse_crossings
+
+            refuse_crossings(config, data, self.display)
         if self.real_girders:
             return
         why = f"for {self.display}, which describes uniform, pinned girders under known loads (issue 24)"
