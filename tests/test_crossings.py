@@ -229,3 +229,28 @@ def test_smoke_posterior_has_the_contract_keys():
         "t0[crossing]",
     ]
     assert abs(s["speed"]["mean"] / truth.vehicle.speed - 1) < 0.03
+
+
+@pytest.mark.parametrize("name", ["ensemble", "bpinn"])
+@pytest.mark.parametrize(
+    "toml, key",
+    [
+        ({"vehicle": {"speed_sd": 0.01}}, "vehicle.speed_sd"),
+        ({"vehicle": {"entry_time_sd": 0.05}}, "vehicle.entry_time_sd"),
+        ({"vehicle": {"entry_time": 0.3}}, "vehicle.entry_time"),
+        ({"model": {"damping": "inferred"}}, "model.damping"),
+        ({"model": {"axle_forces": "fluctuating"}}, "model.axle_forces"),
+        ({"crossing": [{"name": "a"}, {"name": "b", "speed": 7.0}]}, "[[crossing]]"),
+    ],
+)
+def test_pinn_methods_refuse_what_they_would_ignore(name, toml, key):
+    """The PINN methods take the crossing as stated: a declared nuisance is refused in one line naming its
+    key, before anything runs, instead of being silently ignored."""
+    from bayespinn.methods import get
+
+    cfg = bp.resolve("deflection", toml)
+    data = sample_layout(bp.resolve("deflection"), 0)
+    method = get(name)(profile="smoke")
+    with pytest.raises(InputError) as e:
+        method.check(data, cfg)
+    assert str(e.value).startswith(key) and "\n" not in str(e.value)

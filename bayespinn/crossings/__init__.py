@@ -2,6 +2,6 @@
 and the axles' dynamic forces inferred with the priors the user states, for one or several crossings of a
 uniform pinned girder (`reference.crossings_reference`)."""
 
-from .reference import check_crossings, crossings_reference, needs_crossings
+from .reference import check_crossings, crossings_reference, needs_crossings, refuse_crossings
 
-__all__ = ["check_crossings", "crossings_reference", "needs_crossings"]
+__all__ = ["check_crossings", "crossings_reference", "needs_crossings", "refuse_crossings"]

@@ -12,6 +12,7 @@ each crossing's own.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -32,6 +33,10 @@ from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_b
 
 #: modal truncation below this fraction of the noise sd (as `uq.modal_mcmc`)
 TRUNCATION_FRACTION = 0.01
+#: modes in the dynamic correction of the force-basis responses: the fluctuation's spectrum lies below
+#: 4 / FORCE_L_MIN = 33 rad/s, far under the second mode, and two modes leave 5e-4 of those responses
+#: (strain gauges of the Exeter girder, against 24 modes), 1e-5 of the signal
+BASIS_MODES = 2
 #: modes carried by the predictor (reports, fit check)
 PREDICT_MODES = 24
 
@@ -48,6 +53,33 @@ def needs_crossings(cfg: Config, data: Measurements | None = None) -> bool:
         or cfg.model.damping == "inferred"
         or cfg.model.axle_forces == "fluctuating"
         or any(v.speed_sd > 0 or v.entry_time_sd > 0 or v.entry_time != 0 for v in vehicles)
+    )
+
+
+def refuse_crossings(cfg: Config, data: Measurements | None, display: str) -> None:
+    """For a method that takes the crossing as stated (the PINN methods): InputError naming the first key
+    that declares something to infer, rather than silently analysing with the stated values."""
+    if not needs_crossings(cfg, data):
+        return
+    why = f"for {display}, which takes the crossing as stated; --method modal infers it"
+    vehicles = [("vehicle", cfg.vehicle)] + [
+        (f"crossing[{i}]", c.vehicle) for i, c in enumerate(cfg.crossings)
+    ]
+    for where, v in vehicles:
+        if v.speed_sd > 0:
+            raise InputError(f"{where}.speed_sd", v.speed_sd, f"0 {why}")
+        if v.entry_time_sd > 0:
+            raise InputError(f"{where}.entry_time_sd", v.entry_time_sd, f"0 {why}")
+        if v.entry_time != 0:
+            raise InputError(
+                f"{where}.entry_time", v.entry_time, f"0 (the first axle entering at t = 0) {why}"
+            )
+    if cfg.model.damping != "known":
+        raise InputError("model.damping", cfg.model.damping, f"'known' {why}")
+    if cfg.model.axle_forces != "constant":
+        raise InputError("model.axle_forces", cfg.model.axle_forces, f"'constant' {why}")
+    raise InputError(
+        "[[crossing]]", len(cfg.crossings) or "a crossing column", f"one crossing {why}"
     )
 
 
@@ -126,7 +158,7 @@ def _terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[
         model = CrossingModel(
             cfg.beam.length, cfg.beam.mass_per_length, veh.loads, veh.offsets,
             data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
-            basis_modes=min(n_modes, 6),
+            basis_modes=min(n_modes, BASIS_MODES),
         )  # fmt: skip
         out.append(
             CrossingTerm(
@@ -357,13 +389,28 @@ def crossings_reference(
             th = res.x
     h = np.array([_step(n, post) for n in L.names])
     scale = _hessian_scale(post, th, h)
-    ch = sample(post, th, scale, s, seed, progress, desc="crossing MCMC")
-    draws = ch.draws  # (chain, draw, D)
-    flat = draws.reshape(-1, L.dim)
+    s = dataclasses.replace(s, n_walkers=max(s.n_walkers, 2 * L.dim + 2))
+    laplace = len(post.terms) > 1 and not forces
+    if laplace:  # each crossing's speed and entry time by Laplace inside the shared likelihood
+        from .laplace import laplace_sample
+
+        flat, sig, ch, extra = laplace_sample(post, th, scale, sigma, s, seed, progress)
+        shape = sig.shape
+        draws = flat.reshape(*shape, L.dim)
+    else:
+        ch = sample(post, th, scale, s, seed, progress, desc="crossing MCMC")
+        draws = ch.draws  # (chain, draw, D)
+        flat = draws.reshape(-1, L.dim)
+        shape = draws.shape[:2]
+        extra = {}
     par = post.unpack(flat)
-    shape = draws.shape[:2]
     EI = par["EI"].reshape(shape)
-    if forces:
+    if laplace:
+        scheme = (
+            "emcee on the shared parameters and sigma; each crossing's speed and entry time integrated "
+            "out by Laplace (tabulated in the shared parameters), then drawn from its Laplace Gaussian"
+        )
+    elif forces:
         sig = par["sigma"].reshape(shape)
         scheme = (
             "emcee on every inferred parameter; axle-force fluctuations integrated out (Woodbury)"
@@ -411,7 +458,7 @@ def crossings_reference(
         acceptance=ch.acceptance, n_modes=n_modes, truncation_error=trunc,
         force_basis=[c.model.n_basis for c in post.terms] if forces else 0,
         parameters=list(L.names), noise_prior=noise.describe(), scheme=scheme,
-        diagnostics_over="the worst of every sampled parameter",
+        diagnostics_over="the worst of every sampled parameter", **extra,
     )  # fmt: skip
     mean_th = flat.mean(axis=0)
     info = {"map": {n: float(v) for n, v in zip(L.names, th, strict=True)}}

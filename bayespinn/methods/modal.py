@@ -26,6 +26,7 @@ class ModalMCMC(Method):
     reference = True
     Settings = ModalSettings
     real_girders = True
+    real_crossings = True
 
     def check(self, data, config) -> None:
         # Method.check refuses AR(1) noise for the PINN methods; with real_girders it checks nothing else,
