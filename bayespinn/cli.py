@@ -85,13 +85,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="reuse the replicates of the --out file already there when it is the same study "
         "(same method, configuration, SNR, seed, level and options)",
     )
-    c.add_argument(
-        "--mix-versions",
-        dest="mix_versions",
-        action="store_true",
-        help="keep resumed replicates computed by other code than today's (recorded in the study); "
-        "without it they are refused",
-    )
 
     m = sub.add_parser("simulate", help="write a synthetic measurement CSV")
     _common(m, method=False)

@@ -5,8 +5,6 @@ from __future__ import annotations
 import json
 import logging
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -19,38 +17,13 @@ from .options import RunOptions, config_from_args, default_out, resolve_device
 log = logging.getLogger("bayespinn")
 
 
-@contextmanager
-def checkpoint_kept_on_refusal(path: Path) -> Iterator[None]:
-    """Leave a coverage study's checkpoint as it was when the study refuses to mix code versions.
-
-    `coverage_study` opens its checkpoint (which rewrites the file with the resumed study's replicates) before
-    it checks their code versions, so a refused resume would leave the refused replicates in the checkpoint
-    and the next run without `--resume` would be refused again (a known bug of the library function; its fix
-    waits for a change that stales the coverage driver's code version anyway). Only that refusal restores the
-    file: any other stop keeps the replicates finished so far.
-    """
-    from .data.measurements import atomic_write_text
-
-    path = Path(path)
-    before = path.read_text(encoding="utf-8") if path.exists() else None
-    try:
-        yield
-    except InputError as e:
-        if e.field == "--mix-versions":
-            if before is None:
-                path.unlink(missing_ok=True)
-            else:
-                atomic_write_text(path, before)  # never a half-restored checkpoint
-        raise
-
-
 def writable_out(path: str | Path, *, folder: bool) -> Path:
     """`--out` checked before any work starts: a run that trains for minutes must not find at its end that
     it cannot write. `folder`: the command writes a folder there (else one file). The nearest part of the
     path that exists must be a folder this user can create entries in (probed by creating and removing a
     temporary one, which also catches read-only mounts), and the path itself, if it exists, of the right kind.
-    `pipeline.staged_output` creates the folder only when the results are ready; the check lives here, not
-    there, because the pipeline is part of every record's code version and the command line is not.
+    `pipeline.staged_output` creates the folder only when the results are ready; this check is the
+    command line's, made before any of the library's work starts.
     """
     import tempfile
 
@@ -144,22 +117,20 @@ def cmd_coverage(args) -> int:
     )
     # finished replicates survive an interruption here; the same command resumes from them
     partial = out.with_name(out.name + ".partial.jsonl")
-    with checkpoint_kept_on_refusal(partial):
-        res = coverage_study(
-            method,
-            cfg,
-            snr,
-            replicates=args.replicates,
-            level=args.level,
-            seed=args.seed,
-            truth=args.truth,
-            opts=replace(opts, executor=None),
-            executor=opts.executor,
-            progress=not args.quiet,
-            checkpoint=partial,
-            resume_from=out if args.resume else None,
-            mix_versions=args.mix_versions,
-        )
+    res = coverage_study(
+        method,
+        cfg,
+        snr,
+        replicates=args.replicates,
+        level=args.level,
+        seed=args.seed,
+        truth=args.truth,
+        opts=replace(opts, executor=None),
+        executor=opts.executor,
+        progress=not args.quiet,
+        checkpoint=partial,
+        resume_from=out if args.resume else None,
+    )
     atomic_write_text(out, json.dumps(jsonable(res), indent=2) + "\n")
     partial.unlink(missing_ok=True)
     log.info(

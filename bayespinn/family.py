@@ -180,7 +180,7 @@ def bridges(n: int, seed: int = 0, case: str = "deflection", start: int = 0) -> 
 
 
 # ------------------------------------------------------------------------------------------ scoring
-#: the issue's bands: a PINN posterior against the reference's on the same data
+#: the family's bands: a PINN posterior against the reference's on the same data
 Z_MEAN_MAX = 0.35
 Z_SD_MAX = 1.3
 Z_ABS_MAX = 3.0
@@ -225,7 +225,7 @@ def score(summary_methods: dict, reference_key: str) -> dict:
 
 
 def criteria(rows: list[dict]) -> dict:
-    """The issue's criteria for one method over the family's bridges (`rows`: its `score` rows, each with
+    """The family's criteria for one method over the family's bridges (`rows`: its `score` rows, each with
     the bridge's "alpha"): mean z, sd of z, max |z|, the share of sd ratios in the band and of sigma within
     SIGMA_Z_MAX reference sds; each with whether it passes; and the same statistics of z on either side of
     ALPHA_SPLIT."""
@@ -271,16 +271,6 @@ def criteria(rows: list[dict]) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ running
-def code_versions_on_disk(names) -> dict:
-    """Each method's code version (summary key -> version) from the files on disk now, not from this
-    process's memo of them: a long study compares them bridge by bridge with those it started with."""
-    from . import codeversion
-    from . import methods as registry
-
-    codeversion.forget()
-    return {registry.get(n).key: codeversion.method_version(n) for n in names}
-
-
 def data_seed(seed: int, index: int) -> np.random.SeedSequence:
     """The seed of bridge `index`'s dataset and analysis in a family study with root seed `seed`."""
     return np.random.SeedSequence(
@@ -304,6 +294,7 @@ def run_bridge(
     from .data.synthetic import simulate
     from .options import RunOptions
     from .pipeline import analyse
+    from .provenance import record_commit
 
     opts = opts or RunOptions()
     names = registry.parse(methods) if isinstance(methods, str) else list(methods)
@@ -312,8 +303,6 @@ def run_bridge(
     if ref_name not in names:
         names = [ref_name, *names]
     seq = data_seed(seed, b.index)
-    # the code versions before the run, read from disk afresh: the modules a run imports are those there now
-    versions = code_versions_on_disk(names)
     t0 = time.perf_counter()
     data = simulate(b.cfg, snr_db, seq)
     res = analyse(
@@ -328,5 +317,5 @@ def run_bridge(
         "methods": rows,
         "time_s": wall,
         "time_breakdown_s": res.manifest.get("time_breakdown_s"),
-        "code_versions": versions,
+        **record_commit(),
     }

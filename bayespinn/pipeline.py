@@ -4,29 +4,25 @@ from __future__ import annotations
 
 import json
 import logging
-import platform
 import shutil
-import subprocess
 import sys
 import tempfile
 import time
 from collections.abc import Iterable
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
 from . import methods as registry
-from .codeversion import method_version
 from .config import Config
 from .data.measurements import Measurements, read_csv
 from .data.synthetic import realised_snr, sigma_for_snr, simulate
 from .errors import InputError
 from .options import PROFILES, RunOptions
+from .provenance import git_commit, git_dirty, machine, now, versions
 from .uq.posterior import Posterior, jsonable
-from .version import __version__
 
 log = logging.getLogger(__name__)
 
@@ -45,57 +41,6 @@ class RunResult:
     summary: dict
     manifest: dict
     config: Config | None = None
-
-
-def versions() -> dict:
-    out = {"python": platform.python_version(), "bayespinn": __version__}
-    for pkg in ("numpy", "scipy", "torch", "pyro-ppl", "emcee", "arviz", "matplotlib"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = None
-    return out
-
-
-def machine(device: str = "cpu") -> dict:
-    """Where a result was computed: cores, CPU model, torch threads, device, platform."""
-    import os
-
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.lower().startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    try:
-        import torch
-
-        threads = int(torch.get_num_threads())
-    except Exception:  # noqa: BLE001 - never lose a manifest for it
-        threads = None
-    return {
-        "cpus": os.cpu_count(),
-        "cpu_model": cpu,
-        "torch_threads": threads,
-        "device": device,
-        "platform": platform.platform(),
-    }
-
-
-def git_commit() -> str | None:
-    try:
-        r = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        return r.stdout.strip() or None if r.returncode == 0 else None
-    except (OSError, subprocess.SubprocessError):
-        return None
 
 
 def unit_warnings(data: Measurements) -> list[str]:
@@ -293,8 +238,8 @@ def analyse(
         "machine": machine(opts.device),
         "versions": versions(),
         "git_commit": git_commit(),
-        # the code each method's numbers come from (`codeversion`): a record is stale once these change
-        "code_versions": {m.key: method_version(m.name) for m in chosen},
+        "git_dirty": git_dirty(),
+        "date": now(),
         "timings_s": timings,
         "time_breakdown_s": time_breakdown(posts),
     }

@@ -9,26 +9,24 @@ those methods' rows and keeps the others, so a table can be filled in one method
 from __future__ import annotations
 
 import argparse
-import datetime as _dt
 import json
 import logging
 import math
 import os
-import subprocess
 import sys
 import warnings
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from bayespinn import methods
-from bayespinn.codeversion import method_version
 from bayespinn.config import parse_snr, snr_label
 from bayespinn.data.measurements import atomic_write_text
 from bayespinn.errors import InputError
 from bayespinn.executor import cpu_count
 from bayespinn.flags import Parser, add_method_flags, check_method_flags
 from bayespinn.options import RunOptions, resolve_device
-from bayespinn.pipeline import git_commit, machine, versions
+from bayespinn.provenance import commits, commits_text, record_commit, short_commit
+from bayespinn.provenance import provenance as _provenance
 from bayespinn.uq.posterior import jsonable
 
 log = logging.getLogger("studies")
@@ -107,20 +105,6 @@ def entry(main: Callable[[list[str] | None], int]) -> None:
 
 
 # ------------------------------------------------------------------------------------- provenance
-def _git_dirty() -> bool | None:
-    try:
-        r = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=Path(__file__).parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-        return bool(r.stdout.strip()) if r.returncode == 0 else None
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
 def command_line(script: str, argv: list[str]) -> str:
     """The command that reproduces this invocation, e.g. `python studies/table4.py --methods modal`."""
     p = Path(script).resolve()
@@ -136,23 +120,20 @@ def command_line(script: str, argv: list[str]) -> str:
 
 
 def provenance(script: str, argv: list[str], args, **extra) -> dict:
-    """Who made these rows: command, profile, seed, date, machine, versions."""
+    """Who made these rows: command, profile, seed, date, git commit (and whether the code had uncommitted
+    changes), machine and package versions (`bayespinn.provenance`), plus the study's own entries."""
     device = resolve_device(args.device)
+    prov = _provenance(device)
     out = {
         "command": command_line(script, argv),
         "profile": args.profile,
         "seed": args.seed,
         "members": args.members,
         "noise_prior": args.noise_prior,
-        "date": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-        "machine": {**machine(device), "cpus": cpu_count()},
-        "versions": versions(),
-        "git_commit": git_commit(),
-        "git_dirty": _git_dirty(),
+        **prov,
+        "machine": {**prov["machine"], "cpus": cpu_count()},
     }
     out.update(extra)
-    if "methods" in extra:
-        out["code_versions"] = code_versions(extra["methods"])
     return out
 
 
@@ -200,39 +181,10 @@ def cli_name(key: str) -> str:
     return cls.name
 
 
-def code_versions(method_keys: Iterable[str]) -> dict[str, str]:
-    """Today's code version of each method (summary keys), as a run's provenance records it."""
-    return {k: method_version(cli_name(k)) for k in method_keys if methods.by_key(k) is not None}
-
-
-def run_is_fresh(prov: dict, method_key: str) -> bool:
-    """Were this run's rows of `method_key` computed by today's code of that method?"""
-    recorded = (prov.get("code_versions") or {}).get(method_key)
-    return recorded is not None and recorded == code_versions([method_key]).get(method_key)
-
-
 def run_cell(doc: dict, row: dict) -> str:
-    """The `run` column of a table row: the run's label, marked stale when the row's method has changed
-    since (or the run predates code versions)."""
-    label = run_label(doc["runs"], row["run"])
-    return label if run_is_fresh(doc["runs"][row["run"]], row["method"]) else f"{label} (**stale**)"
-
-
-def stale_notice(doc: dict) -> list:
-    """A paragraph under a table when some of its rows were computed by code that has changed since."""
-    from bayespinn.report.document import Paragraph
-
-    stale = [r for r in doc["rows"] if not run_is_fresh(doc["runs"][r["run"]], r["method"])]
-    if not stale:
-        return []
-    return [
-        Paragraph(
-            f"**Stale rows** ({len(stale)} of {len(doc['rows'])}, marked in the `run` column): computed by code "
-            "that has changed since, or before code versions were recorded (`bayespinn.codeversion`); "
-            "they are kept as the last measurement, not re-run with today's code yet. Re-running the command "
-            "of their run refreshes them."
-        )
-    ]
+    """The `run` column of a table row: the run's label and the commit it ran at."""
+    prov = doc["runs"][row["run"]]
+    return f"{run_label(doc['runs'], row['run'])} ({short_commit(prov.get('git_commit'), prov.get('git_dirty'))})"
 
 
 def run_label(runs: dict, rid: str) -> str:
@@ -358,9 +310,9 @@ def key_of(method: str) -> str:
 
 
 # ------------------------------------------------------------------------------ replicate studies
-def open_study(path: Path, schema: str, fingerprint: str, today: str) -> dict:
-    """The study file at `path` to resume (a fresh one when it is missing or another study's), keeping only
-    the replicates computed by code `today` (the others are run again, with a warning)."""
+def open_study(path: Path, schema: str, fingerprint: str) -> dict:
+    """The study file at `path` to resume (a fresh one when it is missing or another study's). Its
+    replicates are kept whichever commit computed them: each names its own (`record_commit`)."""
     doc = {}
     if path.is_file():
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -369,10 +321,6 @@ def open_study(path: Path, schema: str, fingerprint: str, today: str) -> dict:
             doc = {}
     if not doc:
         doc = {"schema": schema, "fingerprint": fingerprint, "records": []}
-    kept = [r for r in doc["records"] if r.get("code_version") == today]
-    if len(kept) < len(doc["records"]):
-        log.warning("%d replicates by other code are run again", len(doc["records"]) - len(kept))
-    doc["records"] = kept
     return doc
 
 
@@ -394,9 +342,9 @@ def run_replicates(doc: dict, path: Path, n: int, compute, summarise, tag: str) 
     return doc
 
 
-def gather_studies(folder: Path, schema: str, today: str, summarise) -> dict:
+def gather_studies(folder: Path, schema: str, summarise) -> dict:
     """Every study file of `schema` under `folder` with records, summarised (without its records and
-    configuration values), each marked fresh when all its replicates were computed by code `today`."""
+    configuration values), with the commits its replicates were computed at (`commits`)."""
     studies = {}
     for f in sorted(folder.glob("*.json")) if folder.is_dir() else []:
         doc = json.loads(f.read_text(encoding="utf-8"))
@@ -405,6 +353,28 @@ def gather_studies(folder: Path, schema: str, today: str, summarise) -> dict:
         studies[f.stem] = {
             **{k: v for k, v in doc.items() if k not in ("records", "config_values")},
             "summary": summarise(doc),
-            "fresh": all(r.get("code_version") == today for r in doc["records"]),
+            "commits": commits(doc["records"]),
         }
     return studies
+
+
+def commits_sentence(d: dict) -> str:
+    """Which code computed a study's replicates, for its page: the commits and how many each; for records
+    older than per-replicate commits, the commit and date of the run that last wrote the study."""
+    counts = dict(d.get("commits") or {})
+    old = counts.pop("unrecorded", 0)
+    runs = d.get("runs")
+    prov = d.get("provenance") or (runs[-1] if isinstance(runs, list) and runs else {}) or {}
+    last = (
+        f"last written at commit {short_commit(prov.get('git_commit'), prov.get('git_dirty'))}"
+        f" on {str(prov.get('date', 'n/a'))[:10]}"
+    )
+    if not counts:
+        return f"{last}; the replicates' own commits were not recorded then"
+    text = f"computed at commit {commits_text(counts)}"
+    return text + (f", {old} unrecorded ({last})" if old else "")
+
+
+def replicate_provenance() -> dict:
+    """What each replicate of a study records about its code: `git_commit` and `git_dirty`."""
+    return record_commit()

@@ -29,11 +29,10 @@ from pathlib import Path
 import common as c
 import numpy as np
 
-from bayespinn.commands import checkpoint_kept_on_refusal
 from bayespinn.config import preset, snr_label
 from bayespinn.errors import InputError
 from bayespinn.executor import Executor
-from bayespinn.options import int_at_least
+from bayespinn.provenance import commits, commits_text
 from bayespinn.report.document import Alert, BulletList, Figure, Heading, Paragraph, table
 from bayespinn.report.units import fmt_pct, name
 from bayespinn.uq.coverage import (
@@ -41,12 +40,8 @@ from bayespinn.uq.coverage import (
     SEEDING,
     binomial_acceptance,
     coverage_study,
-    coverage_version,
     paired_with_reference,
     power,
-    replay,
-    replay_path,
-    study_freshness,
     verdict,
 )
 
@@ -63,39 +58,24 @@ ECDF_BAND = 0.99
 
 
 #: entries a table row copies from its study file: a row whose entries differ is not that file's
-ROW_MATCHES_STUDY = ("replicates", "hits", "code_version", "fingerprint", "runtime_s")
+ROW_MATCHES_STUDY = ("replicates", "hits", "fingerprint", "runtime_s")
 
 
-def freshness(row: dict, out: Path | None = None) -> str:
-    """'today's code' (directly, or vouched for by an identical replay: `uq.coverage.replay`), or why the row
-    is stale: the code version its replicates were computed by against today's (`coverage_version`)."""
-    if row.get("code_version") is None:
-        return "**stale**: predates code versions; not re-run with today's code yet"
+def code(row: dict, out: Path | None = None) -> str:
+    """The `code` column: the commits the row's replicates were computed at (from its study file's
+    records), or the commit of the run that wrote the row where the replicates predate recording theirs;
+    a note when the study file no longer holds the row's numbers."""
+    study = None
     if out is not None and row.get("file") and (out / row["file"]).is_file():
         study = json.loads((out / row["file"]).read_text(encoding="utf-8"))
         if any(study.get(k) != row.get(k) for k in ROW_MATCHES_STUDY):
-            # the study file was rewritten (e.g. by a run stopped before it merged its row): the row's
-            # numbers are not those of the file its freshness would be read from
-            return (
-                f"**stale**: the row's numbers are not those of {row['file']}; "
-                "re-run its study to bring them together"
-            )
-        fresh, how = study_freshness(out / row["file"])
-        if fresh:
-            return how
-        label, _, rest = how.partition(": ")
-        return f"**mixed**: {rest}" if label == "mixed" else f"**stale**: {how}; not re-run yet"
-    today = coverage_version(c.cli_name(row["method"]))
-    versions = row.get("code_versions") or {}
-    if set(versions) == {today}:
-        return "today's code"
-    return f"**stale**: computed by code {row['code_version']}, today's is {today}; not re-run yet"
-
-
-def code_cell(row: dict) -> str:
-    """The `code` column: the freshness `refresh` stored (bold unless today's code computed or replayed it)."""
-    code = row.get("code") or freshness(row).replace("**", "")
-    return code if code.startswith(("today's code", "replayed")) else f"**{code}**"
+            # the study file was rewritten (e.g. by a run stopped before it merged its row)
+            return f"the row's numbers are not those of {row['file']}; re-run its study"
+    recs = (study or {}).get("records") or []
+    counts = commits(recs) if recs else row.get("commits") or {}
+    if counts and set(counts) != {"unrecorded"}:
+        return "replicates at " + commits_text(counts)
+    return "not recorded per replicate (older records; see the run's commit)"
 
 
 def datasets(row: dict) -> str:
@@ -169,8 +149,8 @@ def blocks(doc: dict) -> list:
                     else ""
                 ),
                 datasets(r),
-                code_cell(r),
-                c.run_label(doc["runs"], r["run"]),
+                r.get("code") or code(r),
+                c.run_cell(doc, r),
             )
         )
     out = [
@@ -189,12 +169,9 @@ def blocks(doc: dict) -> list:
             "averaged. Datasets: 'independent' rows draw their replicates from the seed, the SNR and the "
             "index, so two SNR rows are two experiments; 'paired' rows (older seeding) reused the same sample "
             "points and standard-normal draws at every SNR, so such rows are one experiment seen twice and "
-            "must not be pooled. Code: whether the replicates were computed by today's code (the code "
-            "version of the method, the simulator and the coverage driver, `bayespinn.codeversion`); "
-            "'replayed' means they were computed by code that has changed since in ways that do not move "
-            "the numbers (a refactor): today's code re-ran the study's first replicates and reproduced "
-            "every field of their records bit for bit (`python studies/coverage.py --replay N`, certificate "
-            "`coverage/<method>-snr<S>.replay.json`)."
+            "must not be pooled. Code: the commits the replicates were computed at (each replicate records its "
+            "own; a study resumed over several sessions may have several); run: the run that wrote the row "
+            "and its commit (Provenance below)."
         ),
         *alerts,
         table(
@@ -351,16 +328,10 @@ def _rank_ps(p: dict) -> str:
 
 
 def rank_figure(doc: dict, out: Path) -> str | None:
-    """coverage_ranks.png: one ECDF-difference panel per study with its simultaneous band; the path relative
-    to `out`, or None when no study file is there."""
-    import warnings
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import arviz as az
-    import matplotlib.pyplot as plt
-    from scipy import stats
+    """coverage_ranks.png: per study, the rank ECDF with its simultaneous band beside the hit count and its
+    acceptance region (`bayespinn.report.coverage`); the path relative to `out`, or None when no study
+    file is there."""
+    from bayespinn.report.coverage import rank_ecdf_figure
 
     studies = []
     for r in doc["rows"]:
@@ -370,49 +341,19 @@ def rank_figure(doc: dict, out: Path) -> str | None:
             studies.append((r, np.array([q["rank"] for q in recs])))
     if not studies:
         return None
-    n = len(studies)
-    cols = min(n, 3)
-    rows = int(np.ceil(n / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
-    grid = np.linspace(0.0, 1.0, 101)  # evaluation points independent of the ranks
-    for ax, (r, ranks) in zip(axes.ravel(), studies, strict=False):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            az.plot_ecdf(
-                ranks,
-                cdf=stats.uniform(0, 1).cdf,
-                difference=True,
-                confidence_bands="optimized",
-                ci_prob=ECDF_BAND,
-                eval_points=grid,
-                random_state=0,
-                ax=ax,
-            )
-        ax.set_title(
-            f"{name(r['method'])}, {c.snr_text(r['snr_db'])} (n = {ranks.size})", fontsize=9
-        )
-        ax.set_xlabel("rank of the true EI")
-        ax.axhline(0.0, color="0.6", lw=0.6)
-    for ax in axes.ravel()[n:]:
-        ax.set_visible(False)
-    axes[0, 0].set_ylabel("ECDF - uniform")
-    fig.tight_layout()
-    path = out / "coverage_ranks.png"
-    tmp = path.with_name(".coverage_ranks.tmp.png")
-    fig.savefig(tmp, dpi=90)
-    plt.close(fig)
-    tmp.replace(path)
+    label = lambda r: f"{name(r['method'])}, {c.snr_text(r['snr_db'])}"  # noqa: E731
+    path = rank_ecdf_figure(studies, out / "coverage_ranks.png", ECDF_BAND, FALSE_FAILURE, label)
     return path.name
 
 
 def refresh(doc: dict, out: Path, figure: bool = True) -> None:
     """Bring the doc's derived entries up to date: paired comparisons, each row's verdict, power, datasets
-    and freshness, and (with `figure`) the rank figure."""
+    and commits, and (with `figure`) the rank figure."""
     add_paired(doc, out)
     for r in doc["rows"]:
         r["verdict"] = verdict(r["hits"], r["replicates"], r["level"], FALSE_FAILURE)
         r["power_vs_80"] = power(r["replicates"], r["level"], POWER_AGAINST, FALSE_FAILURE)
-        r["code"] = freshness(r, out).replace("**", "")
+        r["code"] = code(r, out)
         r["datasets"] = datasets(r)
         r["acceptance_probability"] = 1 - FALSE_FAILURE
         r["power_against"] = POWER_AGAINST
@@ -424,57 +365,11 @@ def refresh(doc: dict, out: Path, figure: bool = True) -> None:
 
 def write_page(doc: dict, out: Path) -> None:
     """coverage.json, coverage.md and the rank figure of the table doc, with the paired comparisons and each
-    row's verdict, power and freshness brought up to date."""
+    row's verdict, power and commits brought up to date."""
     refresh(doc, out)
     c.write_json(out / "coverage.json", doc)
     c.write_markdown(out / "coverage.md", blocks(doc))
     log.info("wrote %s and %s", out / "coverage.md", out / "coverage.json")
-
-
-def replay_studies(args, argv, methods, levels, cfg, executor, out: Path) -> int:
-    """`--replay N`: certificates for the study files of these methods and levels, then the page."""
-    failed = []
-    for m in methods:
-        key = c.key_of(m)
-        for snr in levels:
-            study = out / "coverage" / f"{key}-snr{snr_label(snr)}.json"
-            if not study.is_file():
-                raise InputError(
-                    "--replay", args.replay, f"a study file {study} to replay (none there)"
-                )
-            doc = json.loads(study.read_text(encoding="utf-8"))
-            n = min(args.replay, int(doc["replicates"]))
-            log.info("replay: %s at %s dB, replicates 0 to %d", key, snr_label(snr), n - 1)
-            cert = replay(
-                doc,
-                m,
-                cfg,
-                indices=list(range(n)),
-                opts=replace(c.run_options(args, snr), progress=False),
-                executor=executor,
-                progress=not args.quiet,
-            )
-            cert["provenance"] = c.provenance(__file__, argv, args, methods=[key], levels=[snr])
-            c.write_json(replay_path(study), cert)
-            log.info(
-                "replay: %s at %s dB: %s (%s)",
-                key,
-                snr_label(snr),
-                "identical" if cert["identical"] else "DIFFERENT",
-                study_freshness(study)[1],
-            )
-            if not cert["identical"]:
-                failed.append(f"{key} at {snr_label(snr)} dB")
-    doc = c.load_table(out / "coverage.json", SCHEMA)
-    if doc["rows"]:
-        write_page(doc, out)
-    if failed:
-        log.error(
-            "replay: today's code does not reproduce %s; those studies stay stale",
-            ", ".join(failed),
-        )
-        return 1
-    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -495,21 +390,6 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="reuse the replicates of each study file already in --out/coverage when it is the same "
         "study (a study carried over several sessions)",
-    )
-    p.add_argument(
-        "--mix-versions",
-        dest="mix_versions",
-        action="store_true",
-        help="keep resumed replicates computed by other code than today's (recorded in the study)",
-    )
-    p.add_argument(
-        "--replay",
-        type=int_at_least("--replay", 1),
-        default=None,
-        metavar="N",
-        help="run no study: re-run the first N replicates of each study file already in --out/coverage with "
-        "today's code, compare them with the stored ones exactly and write the certificate beside the file "
-        "(<study>.replay.json); an identical replay vouches for a study computed by older code",
     )
     p.add_argument(
         "--report-only",
@@ -537,8 +417,6 @@ def main(argv: list[str] | None = None) -> int:
     cfg = preset("deflection")
     keys = [c.key_of(m) for m in methods]
     executor = Executor("local", args.workers)
-    if args.replay:
-        return replay_studies(args, argv, methods, levels, cfg, executor, out)
     prov = c.provenance(
         __file__,
         argv,
@@ -554,21 +432,19 @@ def main(argv: list[str] | None = None) -> int:
             # finished replicates survive an interruption; the same command resumes from them
             study = out / "coverage" / f"{key}-snr{snr_label(snr)}.json"
             partial = study.with_name(study.name + ".partial.jsonl")
-            with checkpoint_kept_on_refusal(partial):
-                res = coverage_study(
-                    m,
-                    cfg,
-                    snr,
-                    replicates=reps[m],
-                    level=args.level,
-                    seed=args.seed,
-                    opts=replace(c.run_options(args, snr), progress=False),
-                    executor=executor,
-                    progress=not args.quiet,
-                    checkpoint=partial,
-                    resume_from=study if args.resume else None,
-                    mix_versions=args.mix_versions,
-                )
+            res = coverage_study(
+                m,
+                cfg,
+                snr,
+                replicates=reps[m],
+                level=args.level,
+                seed=args.seed,
+                opts=replace(c.run_options(args, snr), progress=False),
+                executor=executor,
+                progress=not args.quiet,
+                checkpoint=partial,
+                resume_from=study if args.resume else None,
+            )
             c.write_json(study, res)
             partial.unlink(missing_ok=True)
             row = {k: v for k, v in res.items() if k != "records"}

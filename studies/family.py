@@ -5,11 +5,11 @@ speed parameter alpha = v / (2 f1 L) from 0.015 to 0.2) gets one synthetic datas
 modal reference and the PINN methods run on it; each PINN posterior is scored against the reference one
 on the same data: z = (mean - reference mean) / reference sd, the sd ratio, sigma's z, R-hat/ESS, time.
 Over the bridges: mean and sd of z, max |z|, the share of sd ratios in [0.67, 1.5] and of sigma within 2
-reference sds, each against the issue's bands, and the table split at alpha = 0.04 with the rank
+reference sds, each against the family's bands, and the table split at alpha = 0.04 with the rank
 correlation of z with alpha (a drift as the dynamics grow).
 
 One study per case and SNR in <out>/family/<case>-snr<S>.json, rewritten atomically after every bridge: an
-interrupted study resumes from it (bridges computed by other code than today's are run again), and
+interrupted study resumes from it (each bridge's record names the commit that computed it), and
 `--bridges` can grow a study over several sessions. <out>/family.md and family.json gather every study
 there.
 
@@ -34,6 +34,7 @@ from bayespinn import family, methods
 from bayespinn.config import CASES, preset, snr_label
 from bayespinn.errors import InputError
 from bayespinn.options import int_at_least
+from bayespinn.provenance import commits
 from bayespinn.report.document import Alert, BulletList, Heading, Paragraph, table
 from bayespinn.report.units import name
 
@@ -41,7 +42,7 @@ log = logging.getLogger("studies.family")
 
 STUDY_SCHEMA = "bayespinn.studies.family-study/1"
 SCHEMA = "bayespinn.studies.family/1"
-#: the issue's timing yardstick: the Exeter girder's run at 20 dB, seed 11 (deflection)
+#: the timing yardstick: the Exeter girder's run at 20 dB, seed 11 (deflection)
 TIME_REFERENCE = {"case": "deflection", "snr_db": 20.0, "seed": 11}
 TIME_RATIO_MAX = 2.0
 
@@ -98,7 +99,7 @@ def run_time_reference(args, opts, names) -> dict:
         **TIME_REFERENCE,
         "time_s": time.perf_counter() - t0,
         "runtime_s": {k: p.runtime_s for k, p in res.posteriors.items()},
-        "code_versions": c.code_versions(res.posteriors),
+        **c.replicate_provenance(),
     }
 
 
@@ -107,19 +108,7 @@ def study(args, argv, snr, names) -> dict:
     path = Path(args.out) / "family" / f"{args.case}-snr{snr_label(snr)}.json"
     key = fingerprint(args, snr, names)
     doc = load_study(path, key)
-    fresh = c.code_versions(keys)
-    have = {
-        r["bridge"]["index"]: r
-        for r in doc["records"]
-        if all(r["code_versions"].get(k) == fresh[k] for k in keys)
-    }
-    dropped = len(doc["records"]) - len(have)
-    if dropped:
-        log.info(
-            "family: %d bridges of %s were computed by other code: running them again",
-            dropped,
-            path,
-        )
+    have = {r["bridge"]["index"]: r for r in doc["records"]}
     opts = dataclasses.replace(c.run_options(args, snr), progress=not args.quiet)
     doc.update(
         case=args.case,
@@ -133,7 +122,7 @@ def study(args, argv, snr, names) -> dict:
     prov = c.provenance(__file__, argv, args, methods=keys, snr_db=snr)
     doc["runs"] = [*doc.get("runs", []), prov][-10:]
     tr = doc.get("time_reference")
-    if args.time_reference and not (tr and tr.get("code_versions") == fresh):
+    if args.time_reference and not tr:
         log.info("family: timing the Exeter girder's 20 dB run (seed 11) as the yardstick")
         doc["time_reference"] = run_time_reference(args, opts, names)
         c.write_json(path, doc)
@@ -153,12 +142,6 @@ def study(args, argv, snr, names) -> dict:
             len(b.cfg.vehicle.axles),
         )
         rec = family.run_bridge(b, snr, methods=names, seed=args.seed, opts=opts)
-        if rec["code_versions"] != fresh:
-            # the files changed on disk while the study ran: this record's label would not say which
-            # code computed it (run long studies from a checkout nobody edits, e.g. a git worktree)
-            raise InputError(
-                "code", rec["code_versions"], f"the code the study started with ({fresh})"
-            )
         have[i] = rec
         doc["records"] = [have[k] for k in sorted(have)]
         c.write_json(path, doc)  # atomic: an interruption loses at most the bridge under way
@@ -179,10 +162,9 @@ def study(args, argv, snr, names) -> dict:
 
 # ------------------------------------------------------------------------------------------ the page
 def summarise(doc: dict) -> dict:
-    """A study's criteria per PINN method, its freshness and its times."""
+    """A study's criteria per PINN method, the commits its bridges were computed at, and its times."""
     ref = doc["reference"]
     keys = [k for k in doc["methods"] if k != ref]
-    fresh = c.code_versions(doc["methods"])
     out = {
         k: {
             **family.criteria(
@@ -192,7 +174,6 @@ def summarise(doc: dict) -> dict:
                     if k in r["methods"]
                 ]
             ),
-            "fresh": all(r["code_versions"].get(k) == fresh.get(k) for r in doc["records"]),
         }
         for k in keys
         if any(k in r["methods"] for r in doc["records"])
@@ -200,12 +181,12 @@ def summarise(doc: dict) -> dict:
     tr = doc.get("time_reference")
     times = [r["time_s"] for r in doc["records"]]
     timing = {"max_s": max(times), "median_s": sorted(times)[len(times) // 2]}
-    # the yardstick counts only when the code that timed it computed the bridges (else it is another code's)
-    if tr and all(r["code_versions"] == tr.get("code_versions") for r in doc["records"]):
+    # the yardstick timed in this study (its commit and machine are the study's runs')
+    if tr:
         timing["reference_s"] = tr["time_s"]
         timing["max_ratio"] = max(times) / tr["time_s"]
         timing["within"] = timing["max_ratio"] <= TIME_RATIO_MAX
-    return {"criteria": out, "timing": timing}
+    return {"criteria": out, "timing": timing, "commits": commits(doc["records"])}
 
 
 def gather(out: Path) -> dict:
@@ -258,7 +239,7 @@ def blocks(page: dict) -> list:
             f"log-uniform on {r['alpha'][0]:g}-{r['alpha'][1]:g}) gets one "
             "synthetic dataset; the modal reference (emcee on the exact modal model) and each PINN method run "
             "on it. z = (mean - reference mean) / reference sd of EI; sd ratio = sd / reference sd; sigma z "
-            "the same for the noise sd. Bands (issue 21): mean z within "
+            "the same for the noise sd. Bands: mean z within "
             f"±{family.Z_MEAN_MAX}, sd of z at most {family.Z_SD_MAX}, |z| at most {family.Z_ABS_MAX} on every "
             f"bridge, sd ratio in [{lo}, {hi}] on at least {100 * family.SD_RATIO_SHARE:.0f} % of bridges, "
             f"sigma within {family.SIGMA_Z_MAX:g} reference sds on at least {100 * family.SIGMA_SHARE:.0f} %. "
@@ -296,7 +277,6 @@ def blocks(page: dict) -> list:
                         f"{trend['spearman_rho']:+.2f} (p {trend['p_value']:.3f})",
                         p.get("no_trend", True),
                     ),
-                    "today's code" if cr["fresh"] else "**stale**",
                 )
             )
             if not all(p.values()):
@@ -314,7 +294,6 @@ def blocks(page: dict) -> list:
                     "sd ratio in band",
                     "sigma within 2 sd",
                     "z vs alpha (rho)",
-                    "code",
                 ),
                 crit_rows,
             )
@@ -389,7 +368,11 @@ def blocks(page: dict) -> list:
                 + (" (uncommitted changes)" if prov.get("git_dirty") else "")
                 + (f"; note: {prov['note']}" if prov.get("note") else "")
             )
-        out.append(Paragraph(f"Study file `{s['file']}`. Runs that computed its bridges:"))
+        out.append(
+            Paragraph(
+                f"Study file `{s['file']}`; its bridges {c.commits_sentence(s)}. Runs that computed them:"
+            )
+        )
         out.append(BulletList(lines))
     return out
 

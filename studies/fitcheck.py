@@ -37,7 +37,6 @@ import numpy as np
 from girders import coverage_rows, parameters
 from scipy import stats
 
-from bayespinn.codeversion import method_version
 from bayespinn.config import CASES, resolve, snr_label
 from bayespinn.data.synthetic import simulate
 from bayespinn.errors import InputError
@@ -62,11 +61,6 @@ def data_seed(seed: int, i: int) -> np.random.SeedSequence:
     """Replicate i's seed (data and analysis) in a study with root seed `seed`: independent of the
     girder studies' and of every other replicate's."""
     return np.random.SeedSequence(int(seed), spawn_key=(zlib.crc32(b"fitcheck"), int(i)))
-
-
-def code_version() -> str:
-    """The code a replicate's verdict depends on: the modal reference, the data simulator and the check."""
-    return method_version("modal", "bayespinn.uq.fitcheck")
 
 
 def exact_interval(k: int, n: int, prob: float = SHARE_CI) -> list[float]:
@@ -97,7 +91,7 @@ def replicate(cfg, levels: list, seed: int, i: int, opts) -> dict:
         "EI_rel_error_pct": m["EI"].get("rel_error_pct"),
         "converged": (m.get("diagnostics") or {}).get("converged"),
         "time_s": time.perf_counter() - t0,
-        "code_version": code_version(),
+        **c.replicate_provenance(),
     }
 
 
@@ -158,7 +152,7 @@ def run_study(args, argv, levels) -> dict:
     ).hexdigest()[:16]
     config = Path(args.config) if args.config else None
     path = Path(args.out) / "fitcheck" / f"{study_name(config, args.case, levels)}.json"
-    doc = c.open_study(path, STUDY_SCHEMA, key, code_version())
+    doc = c.open_study(path, STUDY_SCHEMA, key)
     doc.update(
         config=str(config) if config else None,
         config_values=c.jsonable(cfg.to_dict()),
@@ -181,10 +175,8 @@ def run_study(args, argv, levels) -> dict:
 
 
 def gather(out: Path) -> dict:
-    """Every fit-check study under <out>/fitcheck, summarised, each marked fresh when all its replicates
-    were computed by today's code of the modal reference and the check."""
-    today = code_version()
-    studies = c.gather_studies(out / "fitcheck", STUDY_SCHEMA, today, summarise)
+    """Every fit-check study under <out>/fitcheck, summarised, with the commits its replicates ran at."""
+    studies = c.gather_studies(out / "fitcheck", STUDY_SCHEMA, summarise)
     return {"schema": SCHEMA, "studies": studies}
 
 
@@ -247,7 +239,7 @@ def blocks(page: dict) -> list:
             table(("SNR", f"`{d['expect']}`", "share", "exact 95 % interval"), rows),
             Paragraph(
                 f"{s['replicates']} replicates "
-                f"({'today' + chr(39) + 's code' if d['fresh'] else '**stale**: computed by code that has changed since'}), "
+                f"({c.commits_sentence(d)}), "
                 f"{s['converged']} converged, {s['unchecked']} without a verdict; {_pct(s['share'])} "
                 f"`{d['expect']}` {verdict} the required {_pct(s['required_share'])}; median lag-1 "
                 f"autocorrelation of the residuals{_whitened(d)} {s['median_residual_autocorr']:+.3f}; "

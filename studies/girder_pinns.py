@@ -7,15 +7,10 @@ mean in reference sds and its sd ratio, the damaged segment's P(damaged), conver
 Replicate i uses the same dataset as replicate i of `studies/girders.py` (the reference's coverage study) for
 the same configuration, case, SNR and seed. One study per configuration, case and SNR in
 <out>/girder_pinns/<name>-<case>-snr<S>.json, rewritten atomically after every replicate: an interrupted
-study resumes from it; replicates computed by other code are run again. <out>/girder_pinns.md and
+study resumes from it, and each replicate records the commit that computed it. <out>/girder_pinns.md and
 girder_pinns.json gather every study there.
 
     python studies/girder_pinns.py --config examples/damaged-girder.toml --snr 30 --replicates 20
-
-A study computed by code that has changed since is stale, unless today's code reproduces its first
-replicates field for field (times aside): `--replay N` re-runs replicates 0..N-1 and writes the certificate
-<study>.replay.json beside it; an identical certificate for today's code lets the page call the study
-'replayed' instead of stale (the change did not touch what it computes).
 """
 
 from __future__ import annotations
@@ -46,12 +41,6 @@ METHODS = ("modal", "ensemble", "bpinn")
 KEYS = ("modal_mcmc", "ensemble", "bpinn")
 
 
-def today() -> str:
-    """One version string for the three methods' code (a replicate is fresh when it matches)."""
-    v = c.code_versions(KEYS)
-    return ";".join(f"{k}:{v[k]}" for k in KEYS)
-
-
 def _segments(m: dict) -> tuple[np.ndarray, np.ndarray]:
     """(mean, sd) of each segment's EI [N m^2] in a summary entry."""
     segs = m.get("EI_segments") or [m["EI"]]
@@ -66,7 +55,12 @@ def replicate(cfg, snr: float | None, seed: int, i: int, opts) -> dict:
     res = analyse(data, cfg, methods=list(METHODS), seed=seq, snr_db=snr, opts=opts, truth=truth)
     ms = res.summary["methods"]
     ref_mean, ref_sd = _segments(ms["modal_mcmc"])
-    out = {"index": i, "methods": {}, "time_s": time.perf_counter() - t0, "code_version": today()}
+    out = {
+        "index": i,
+        "methods": {},
+        "time_s": time.perf_counter() - t0,
+        **c.replicate_provenance(),
+    }
     for k in KEYS:
         m = ms[k]
         mean, sd = _segments(m)
@@ -132,7 +126,7 @@ def run_study(args, argv, snr) -> dict:
         ).encode()
     ).hexdigest()[:16]
     path = study_path(Path(args.out), Path(args.config), args.case, snr)
-    doc = c.open_study(path, STUDY_SCHEMA, key, today())
+    doc = c.open_study(path, STUDY_SCHEMA, key)
     doc.update(
         config=str(args.config),
         config_values=c.jsonable(cfg.to_dict()),
@@ -153,82 +147,9 @@ def run_study(args, argv, snr) -> dict:
     )
 
 
-#: fields of a replicate's record that are wall-clock times, not results (a replay does not compare them)
-TIME_FIELDS = ("time_s",)
-
-
-def _results(r: dict) -> dict:
-    """A replicate's record without its times and code version: what a replay must reproduce."""
-    out = {k: v for k, v in r.items() if k not in TIME_FIELDS + ("code_version",)}
-    out["methods"] = {
-        k: {kk: vv for kk, vv in m.items() if kk not in TIME_FIELDS}
-        for k, m in r.get("methods", {}).items()
-    }
-    return out
-
-
-def replay_path(study: Path) -> Path:
-    return study.with_suffix(".replay.json")
-
-
-def replay_study(args, argv, snr) -> dict:
-    """Re-run replicates 0..args.replay-1 of the study with today's code; the certificate says whether every
-    result field came out identical."""
-    cfg = resolve(args.case, args.config)
-    path = study_path(Path(args.out), Path(args.config), args.case, snr)
-    if not path.is_file():
-        raise InputError("--replay", args.replay, f"a study file {path} to replay (none there)")
-    doc = json.loads(path.read_text(encoding="utf-8"))
-    stored = {int(r["index"]): r for r in doc["records"]}
-    n = min(args.replay, len(stored))
-    opts = c.run_options(args, snr)
-    diffs, versions = [], sorted({stored[i]["code_version"] for i in range(n)})
-    for i in range(n):
-        log.info("replay: replicate %d of %d", i + 1, n)
-        new = replicate(cfg, snr, args.seed, i, opts)
-        if _results(new) != _results(stored[i]):
-            diffs.append(i)
-    cert = {
-        "study": path.name,
-        "fingerprint": doc.get("fingerprint"),
-        "of": versions,
-        "today": today(),
-        "replicates": list(range(n)),
-        "identical": not diffs,
-        "different": diffs,
-        "command": "python studies/girder_pinns.py " + " ".join(argv),
-        "machine": c.provenance(__file__, argv, args, methods=list(KEYS)).get("machine"),
-    }
-    c.write_json(replay_path(path), cert)
-    log.info(
-        "replay: %s: %s",
-        path.name,
-        "identical with today's code" if not diffs else f"replicates {diffs} differ",
-    )
-    return cert
-
-
-def _replayed(path: Path, doc: dict) -> bool:
-    """Does an identical replay certificate vouch for this study's records with today's code?"""
-    rp = replay_path(path)
-    if not rp.is_file():
-        return False
-    cert = json.loads(rp.read_text(encoding="utf-8"))
-    return (
-        cert.get("identical") is True
-        and cert.get("today") == today()
-        and cert.get("fingerprint") == doc.get("fingerprint")
-        and {r.get("code_version") for r in doc["records"]} <= set(cert.get("of") or [])
-    )
-
-
 def gather(out: Path) -> dict:
     folder = out / "girder_pinns"
-    studies = c.gather_studies(folder, STUDY_SCHEMA, today(), summarise)
-    for name, d in studies.items():
-        if not d["fresh"]:
-            doc = json.loads((folder / f"{name}.json").read_text(encoding="utf-8"))
-            d["replayed"] = _replayed(folder / f"{name}.json", doc)
+    studies = c.gather_studies(folder, STUDY_SCHEMA, summarise)
     return {"schema": SCHEMA, "studies": studies}
 
 
@@ -278,14 +199,7 @@ def blocks(page: dict) -> list:
                 f"{_fmt(v['p_damaged_min'] or [], '{:.3f}')}; {v['converged']} of {s['replicates']} "
                 f"converged, {v['fits']} fit; median {v['median_time_s']:.0f} s."
             )
-        fresh = (
-            "today's code"
-            if d["fresh"]
-            else "replayed: computed by older code that today's code reproduced on its first "
-            "replicates, `--replay`"
-            if d.get("replayed")
-            else "**stale**: computed by code that has changed since"
-        )
+        fresh = c.commits_sentence(d)
         out += [
             Heading(f"{name}: {d['config']}, {d['case']}, SNR {snr_label(d['snr_db'])}", 2),
             table(("method", "parameter", "hits", "99 % region", "inside", "power vs 80 %"), rows),
@@ -316,13 +230,6 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--snr", default="30", help="SNR in dB (default 30)")
     p.add_argument("--case", default="deflection", help="deflection (default) or strain")
-    p.add_argument(
-        "--replay",
-        type=int_at_least("--replay", 1),
-        default=None,
-        help="re-run the study's first N replicates with today's code and write the certificate "
-        "<study>.replay.json (an identical one vouches for a study computed by older code)",
-    )
     args = p.parse_args(argv)
     c.setup_logging(args.quiet)
     if args.case not in CASES:
@@ -332,10 +239,7 @@ def main(argv: list[str] | None = None) -> int:
             "--methods", args.methods, "modal,ensemble,bpinn (the reference and both PINN methods)"
         )
     snr = parse_snr(args.snr)
-    if args.replay is not None:
-        replay_study(args, argv, snr)
-    else:
-        run_study(args, argv, snr)
+    run_study(args, argv, snr)
     write_page(Path(args.out))
     return 0
 

@@ -93,7 +93,7 @@ def replicate(cfg, snr: float | None, seed: int, i: int, opts) -> dict:
         "rhat": m.get("diagnostics", {}).get("rhat"),
         "converged": m.get("diagnostics", {}).get("converged"),
         "time_s": time.perf_counter() - t0,
-        "code_version": c.code_versions(["modal_mcmc"])["modal_mcmc"],
+        **c.replicate_provenance(),
     }
 
 
@@ -150,7 +150,7 @@ def run_study(args, argv, snr) -> dict:
         ).encode()
     ).hexdigest()[:16]
     path = study_path(Path(args.out), Path(args.config), args.case, snr)
-    doc = c.open_study(path, STUDY_SCHEMA, key, c.code_versions(["modal_mcmc"])["modal_mcmc"])
+    doc = c.open_study(path, STUDY_SCHEMA, key)
     doc.update(
         config=str(args.config),
         config_values=c.jsonable(cfg.to_dict()),
@@ -172,10 +172,8 @@ def run_study(args, argv, snr) -> dict:
 
 
 def gather(out: Path) -> dict:
-    """Every girder study under <out>/girders, summarised, each marked fresh when all its replicates were
-    computed by today's code of the modal reference."""
-    today = c.code_versions(["modal_mcmc"])["modal_mcmc"]
-    studies = c.gather_studies(out / "girders", STUDY_SCHEMA, today, summarise)
+    """Every girder study under <out>/girders, summarised, with the commits its replicates ran at."""
+    studies = c.gather_studies(out / "girders", STUDY_SCHEMA, summarise)
     return {"schema": SCHEMA, "studies": studies}
 
 
@@ -209,7 +207,7 @@ def blocks(page: dict) -> list:
             Heading(f"{name}: {d['config']}, {d['case']}, SNR {snr_label(d['snr_db'])}", 2),
             table(("parameter", "hits", "99 % region", "inside", "power vs 80 %"), rows),
             Paragraph(
-                f"{s['replicates']} replicates ({'today' + chr(39) + 's code' if d['fresh'] else '**stale**: computed by code that has changed since'}), "
+                f"{s['replicates']} replicates ({c.commits_sentence(d)}), "
                 f"{s['converged']} converged; median time {s['median_time_s']:.1f} s per replicate"
                 + (
                     f"; P(damaged) per segment, median {pd_med}, smallest {pd_min}"

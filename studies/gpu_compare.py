@@ -20,6 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bayespinn.provenance import commits  # noqa: E402
 from bayespinn.uq.coverage import binomial_acceptance, paired_with_reference  # noqa: E402
 
 #: the issue's tolerance on sd of z and median sd ratio against the CPU study's
@@ -52,7 +53,7 @@ def compare(study: dict, cpu_dir: Path) -> dict:
         "gpu_vs_reference": gpu_pair,
         "cpu_vs_reference": cpu_pair,
         "gpu_all_vs_reference": gpu_all,
-        "cpu_study_code_version": cpu.get("code_version"),
+        "cpu_study_commits": commits(cpu.get("records") or []),
         "tolerance": TOLERANCE,
     }
     for k in ("sd_z", "median_sd_ratio"):

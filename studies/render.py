@@ -1,9 +1,9 @@
 """Re-render the committed study pages from their JSON with today's code, running nothing.
 
-Each page marks the rows that today's code would compute differently (stale: their code version is not
-today's, see `bayespinn.codeversion`), so after a change to the science the pages are re-rendered with
-this script and say which rows need re-running; `tests/test_records.py` fails while a committed page
-differs from what this script would write.
+Each page shows, beside its figures, the commit, date and machine of the runs that computed them: a
+page rendered after a change of the code still shows the figures that code's predecessors measured, and
+says so by their commits. `tests/test_records.py` fails while a committed page differs from what this
+script would write.
 
     python studies/render.py --out reports/paper
 """

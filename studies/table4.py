@@ -165,7 +165,6 @@ def blocks(doc: dict) -> list:
         )
     )
     out += c.not_run_yet(doc)
-    out += c.stale_notice(doc)
     out += [
         Heading("Files"),
         BulletList(

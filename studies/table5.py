@@ -223,7 +223,6 @@ def blocks(doc: dict) -> list:
             )
         out.append(BulletList(tuple(notes)))
     out += c.not_run_yet(doc)
-    out += c.stale_notice(doc)
     out += [
         Heading("Provenance"),
         BulletList(tuple(c.provenance_lines(doc["runs"], list(doc["runs"])))),

@@ -222,31 +222,23 @@ def test_cli_coverage_resumes_from_its_file(tmp_path):
     assert json.loads(out.read_text(encoding="utf-8"))["resumed_replicates"] == 0
 
 
-def test_cli_coverage_refused_resume_leaves_the_checkpoint_as_it_was(tmp_path):
-    """A resume refused for mixing code versions exits 2 with the one-line message and leaves the checkpoint
-    of an interrupted run as it was: its replicates are still there and no refused replicate joined them,
-    so the same command without --resume goes on from them. Negative control: the library function alone
-    (no guard) writes the refused replicate into the checkpoint (tests/test_executor.py, strict xfail)."""
+def test_cli_coverage_resume_keeps_replicates_of_another_commit(tmp_path):
+    """A resume reuses the replicates of the same study whatever commit computed them (each record names
+    its own), goes on from the checkpoint an interrupted run left, and consumes it."""
     out = tmp_path / "cov.json"
     args = ("coverage", "--method", "modal", "--snr", "30", "--profile", "smoke")
     args += ("--out", str(out), "--quiet")
-    assert _cli(*args, "--replicates", "2").returncode == 0
+    assert _cli(*args, "--replicates", "1").returncode == 0
     doc = json.loads(out.read_text(encoding="utf-8"))
-    doc["records"][0]["code_version"] = "0123456789ab"  # as if computed by older code
+    doc["records"][0].update(git_commit="0123456789abcdef", git_dirty=False)  # an older commit's
     out.write_text(json.dumps(doc), encoding="utf-8")
     partial = out.with_name(out.name + ".partial.jsonl")
-    kept = (
-        json.dumps({"fingerprint": doc["fingerprint"]})
-        + "\n"
-        + json.dumps(doc["records"][1])
-        + "\n"
-    )
-    partial.write_text(
-        kept, encoding="utf-8"
-    )  # an interrupted run of today's code: replicate 1 done
-    r = _cli(*args, "--replicates", "3", "--resume")
-    assert r.returncode == 2 and "--mix-versions" in r.stderr and "Traceback" not in r.stderr
-    assert partial.read_text(encoding="utf-8") == kept
+    r = _cli(*args, "--replicates", "2", "--resume")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(out.read_text(encoding="utf-8"))
+    assert res["records"][0] == doc["records"][0] and res["resumed_replicates"] == 1
+    assert res["commits"]["0123456789ab"] == 1 and sum(res["commits"].values()) == 2
+    assert not partial.exists()
 
 
 @pytest.mark.parametrize(

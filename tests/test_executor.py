@@ -302,49 +302,68 @@ def _small_modal_study(n, **kw):
     )
 
 
-def test_coverage_resume_refuses_other_code_unless_asked(tmp_path, monkeypatch):
-    """Replicates computed by other code (another code version) are not mixed into a study silently: the
-    resume raises InputError naming --mix-versions; asked to mix, the study records both versions."""
+def test_coverage_resume_keeps_other_commits_and_counts_them(tmp_path):
+    """A resumed study keeps replicates whatever commit computed them: each record names its own commit,
+    and the study counts the replicates of each (`commits`), so its page can say which code contributed."""
     import json
 
+    from bayespinn.provenance import code_commit, short_commit
+
+    first = tmp_path / "first.json"
+    doc = _small_modal_study(2)
+    today = short_commit(code_commit()["commit"], code_commit()["dirty"])
+    assert doc["commits"] == {today: 2}
+    assert all("git_commit" in r and "code_version" not in r for r in doc["records"])
+    doc["records"][0]["git_commit"] = "0123456789abcdef"  # as if computed at an older commit
+    doc["records"][0]["git_dirty"] = False
+    first.write_text(json.dumps(doc), encoding="utf-8")
+    resumed = _small_modal_study(3, resume_from=first)
+    assert resumed["resumed_replicates"] == 2
+    assert resumed["records"][0] == doc["records"][0]  # kept as it was, not re-run
+    assert resumed["commits"] == dict(sorted({"0123456789ab": 1, today: 2}.items()))
+
+
+def _torn_checkpoint(path, key: str, rec: dict) -> str:
+    """The checkpoint an interrupted run leaves: its header, one finished replicate, a line cut short."""
+    import json
+
+    text = json.dumps({"fingerprint": key}) + "\n" + json.dumps(rec) + "\n" + '{"index": 2, "hi'
+    path.write_text(text, encoding="utf-8")
+    return text
+
+
+def test_a_study_stopped_before_any_replicate_leaves_the_checkpoint_as_it_was(
+    tmp_path, monkeypatch
+):
+    """Opening a checkpoint writes nothing: a study that fails (bad input found by a replicate, a crash)
+    before it finishes a replicate leaves the checkpoint byte for byte as it found it, so the resumed
+    replicates of an earlier file are not written into it and the next run starts from the same state.
+    Once a replicate finishes, the checkpoint holds the resumed ones, the new one, and no torn line."""
+    import json
+
+    import bayespinn.uq.coverage as cov
     from bayespinn.errors import InputError
 
     first = tmp_path / "first.json"
     doc = _small_modal_study(2)
-    assert doc["code_versions"] == {doc["code_version"]: 2} and doc["mixed_versions"] is False
-    doc["records"][0]["code_version"] = (
-        "0123456789ab"  # as if computed before a change to the method
-    )
-    first.write_text(json.dumps(doc), encoding="utf-8")
-    with pytest.raises(InputError, match="--mix-versions"):
-        _small_modal_study(3, resume_from=first)
-    mixed = _small_modal_study(3, resume_from=first, mix_versions=True)
-    assert mixed["mixed_versions"] is True and mixed["resumed_replicates"] == 2
-    assert mixed["code_versions"] == {"0123456789ab": 1, mixed["code_version"]: 2}
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="known bug, fix deferred: the Checkpoint rewrites its file with the resumed study's records before "
-    "the code-version check refuses them; fixing it changes the coverage driver's code version and so stales "
-    "the GPU ensemble study, which only a GPU session can extend or redo",
-)
-def test_a_refused_resume_leaves_the_checkpoint_as_it_was(tmp_path):
-    """A resume refused for mixing code versions must not write the refused replicates into the checkpoint:
-    the next run without --resume would otherwise find them there and be refused again."""
-    import json
-
-    from bayespinn.errors import InputError
-
-    first = tmp_path / "first.json"
-    doc = _small_modal_study(1)
-    doc["records"][0]["code_version"] = "0123456789ab"
-    first.write_text(json.dumps(doc), encoding="utf-8")
+    only0 = {**doc, "records": doc["records"][:1]}
+    first.write_text(json.dumps(only0), encoding="utf-8")
     ck = tmp_path / "study.json.partial.jsonl"
-    with pytest.raises(InputError, match="--mix-versions"):
-        _small_modal_study(2, resume_from=first, checkpoint=ck)
-    kept = ck.read_text(encoding="utf-8").splitlines()[1:] if ck.exists() else []
-    assert kept == []
+    before = _torn_checkpoint(ck, doc["fingerprint"], doc["records"][1])
+
+    def refuse(task):
+        raise InputError("data", task.index, "a dataset this method accepts")
+
+    monkeypatch.setattr(cov, "run_replicate", refuse)
+    with pytest.raises(InputError):
+        _small_modal_study(3, resume_from=first, checkpoint=ck)
+    assert ck.read_text(encoding="utf-8") == before
+    monkeypatch.undo()
+    res = _small_modal_study(3, resume_from=first, checkpoint=ck)
+    assert res["resumed_replicates"] == 2 and [r["index"] for r in res["records"]] == [0, 1, 2]
+    lines = ck.read_text(encoding="utf-8").splitlines()
+    assert json.loads(lines[0]) == {"fingerprint": doc["fingerprint"]}
+    assert sorted(json.loads(x)["index"] for x in lines[1:]) == [0, 1, 2]
 
 
 def test_coverage_datasets_are_independent_across_snr_and_shared_across_methods():

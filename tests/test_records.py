@@ -1,216 +1,206 @@
-"""Every figure the project states is backed by a committed record, and every committed page is current.
+"""Every figure the project states is one named field of one committed record, and every page is current.
 
-- README: each bullet of the "Status" section cites at least one record (a committed JSON under
-  reports/), and every number in the bullet is found in the records it cites, at the precision shown
-  (as a value, as a percentage of a fraction, or in a recorded command). A negative control plants a
-  number that no record holds and expects it to be flagged.
-- A bullet that quotes a record computed by code that has changed since (its code versions are not
-  today's) must say "stale".
+- docs/results.md is what `studies/results_page.py` generates from the committed records: each row names
+  a record and a key path into it, prints that field at the spec's precision, and shows the provenance
+  (commit, date, machine) of the run that computed it. Negative controls: a value changed in its last
+  printed digit, and an entry pointed at a nearby field of similar magnitude, must both be caught.
+- The README quotes no measured figures: it links to docs/results.md.
 - Study pages: each committed page under reports/paper is exactly what today's code renders from its
-  committed JSON (`studies/render.py`). A page whose rows were computed by code that has changed since
-  then says so row by row (stale), and this test fails until the page is re-rendered to say it.
+  committed JSON (`studies/render.py`).
 """
 
 from __future__ import annotations
 
-import json
-import math
+import dataclasses
 import re
+import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
+from bayespinn import records
+
 ROOT = Path(__file__).resolve().parents[1]
-README = ROOT / "README.md"
-RECORD = re.compile(r"reports/[\w./-]+\.json")
-#: a number as written in prose: optional sign, digits with optional thousands commas, optional decimals,
-#: optional exponent; not part of a word (R-hat's "R", a path, a version such as 3.11)
-NUMBER = re.compile(r"(?<![\w.])[-+−]?\d[\d,]*(?:\.\d+)?(?:e[-+]?\d+)?(?![\w])")
+sys.path.insert(0, str(ROOT / "studies"))  # the study scripts import each other by name
+
+import results_page as rp  # noqa: E402
 
 
-def status_bullets(text: str) -> list[str]:
-    """The bullets of the README's '## Status' section, continuation lines joined."""
-    m = re.search(r"^## Status[^\n]*\n(.*?)(?=^## )", text, re.S | re.M)
-    assert m, "README has no '## Status' section"
-    bullets, cur = [], None
-    for line in m.group(1).splitlines():
-        if line.startswith("- "):
-            if cur is not None:
-                bullets.append(cur)
-            cur = line[2:]
-        elif cur is not None and line.startswith("  "):
-            cur += " " + line.strip()
-        elif cur is not None and not line.strip():
-            bullets.append(cur)
-            cur = None
-    if cur is not None:
-        bullets.append(cur)
-    return bullets
-
-
-def _numbers_in_json(obj, out: list[float]) -> None:
-    if isinstance(obj, dict):
-        for v in obj.values():
-            _numbers_in_json(v, out)
-    elif isinstance(obj, list):
-        for v in obj:
-            _numbers_in_json(v, out)
-    elif isinstance(obj, bool):
-        return
-    elif isinstance(obj, int | float):
-        if math.isfinite(obj):
-            out.append(float(obj))
-    elif isinstance(obj, str):
-        for tok in NUMBER.findall(obj):
-            try:
-                out.append(float(tok.replace(",", "").replace("−", "-")))
-            except ValueError:
-                pass
-
-
-def record_numbers(paths: list[str]) -> list[float]:
-    vals: list[float] = []
-    for p in paths:
-        _numbers_in_json(json.loads((ROOT / p).read_text(encoding="utf-8")), vals)
-    return vals
-
-
-def _decimals(tok: str) -> int:
-    mant = tok.split("e")[0]
-    return len(mant.split(".")[1]) if "." in mant else 0
-
-
-def backed(tok: str, values: list[float]) -> bool:
-    """Is the number `tok` (as written) one of `values` shown at its precision (or as a percentage)?"""
-    x = float(tok.replace(",", "").replace("−", "-"))
-    if "e" in tok:  # scientific: 3 significant digits agree
-        return any(
-            v != 0 and abs(v - x) <= 0.5 * 10 ** (math.floor(math.log10(abs(x))) - _decimals(tok))
-            for v in values
+def _full_history() -> bool:
+    """Dates of older records come from git (their commit's date): a full clone is needed to regenerate."""
+    try:
+        r = subprocess.run(
+            ["git", "-C", str(ROOT), "rev-parse", "--is-shallow-repository"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+            check=False,
         )
-    d = _decimals(tok)
-    half = 0.5 * 10**-d + 1e-12
-    for v in values:
-        for cand in (v, 100 * v):
-            if abs(cand - x) <= half or abs(abs(cand) - abs(x)) <= half:
-                return True
-    return False
+    except (OSError, subprocess.SubprocessError):
+        return False
+    return r.returncode == 0 and r.stdout.strip() == "false"
 
 
-def unbacked(bullet: str) -> list[str]:
-    """The numbers of a status bullet that no record it cites holds (all of them when it cites none)."""
-    paths = RECORD.findall(bullet)
-    missing = [p for p in paths if not (ROOT / p).is_file()]
-    assert not missing, f"records cited but not committed: {missing}"
-    text = RECORD.sub(" ", bullet)
-    text = re.sub(r"\]\([^)]*\)", "]", text)  # link targets
-    vals = record_numbers(paths)
-    return [tok for tok in NUMBER.findall(text) if not backed(tok, vals)]
+needs_git = pytest.mark.skipif(not _full_history(), reason="needs a full git clone (record dates)")
 
 
-def record_is_fresh(path: str) -> bool | None:
-    """Was the record computed by today's code? None for records that carry no code version (table JSON)."""
-    from bayespinn.records import run_freshness
-    from bayespinn.uq.coverage import study_freshness
-
-    p = ROOT / path
-    doc = json.loads(p.read_text(encoding="utf-8"))
-    if doc.get("schema") == "bayespinn.coverage/1":
-        return study_freshness(p)[0]
-    if p.name in ("summary.json", "manifest.json"):
-        return run_freshness(p.parent)[0]
-    return study_records_fresh(doc)
+@pytest.fixture(scope="module")
+def page() -> str:
+    return rp.PAGE.read_text(encoding="utf-8")
 
 
-def study_records_fresh(doc: dict) -> bool | None:
-    """A study file whose records each carry the code versions of the methods that computed them (the
-    family of bridges): fresh when every record's are today's. None for files that carry none."""
-    from bayespinn.records import today_versions
-
-    recs = doc.get("records")
-    if not isinstance(recs, list) or not recs:
-        return None
-    if not all(isinstance(r, dict) and isinstance(r.get("code_versions"), dict) for r in recs):
-        return None
-    return all(r["code_versions"] == today_versions(r["code_versions"]) for r in recs)
+@pytest.fixture(scope="module")
+def generated() -> str:
+    return rp.render()
 
 
-def test_every_status_number_names_a_record():
-    bullets = status_bullets(README.read_text(encoding="utf-8"))
-    assert len(bullets) >= 3
-    problems = {}
-    for b in bullets:
-        if not RECORD.search(b):
-            problems[b[:60]] = "cites no record"
-            continue
-        bad = unbacked(b)
-        if bad:
-            problems[b[:60]] = f"numbers without a record: {bad}"
-        stale = [p for p in RECORD.findall(b) if record_is_fresh(p) is False]
-        unsaid = unflagged(b, stale)
-        if unsaid:
-            problems[b[:60]] = (
-                f"quotes records computed by code that has changed since, without saying so: {unsaid}"
-            )
-    assert not problems, json.dumps(problems, indent=1)
-
-
-def sentences(bullet: str) -> list[str]:
-    """A bullet cut into sentences: at a full stop followed by a space and a capital, a quote or a bracket
-    (a record's path, a version or a decimal has no space after its dots)."""
-    return re.split(r"(?<=\.)\s+(?=[A-Z*(`])", bullet)
-
-
-def unflagged(bullet: str, stale: list[str]) -> list[str]:
-    """The stale records of `stale` that the bullet cites without saying "stale" in the sentence that cites
-    them or the one before it: a bullet that calls one figure stale does not excuse the others."""
-    ss = sentences(bullet)
-    out = []
-    for path in stale:
-        for i, s in enumerate(ss):
-            if path in s and not any("stale" in t.lower() for t in ss[max(i - 1, 0) : i + 1]):
-                out.append(path)
-                break
-    return out
-
-
-def test_a_stale_record_must_be_called_stale_where_it_is_cited():
-    """Negative control: "stale" elsewhere in a bullet does not cover a record cited two sentences on."""
-    b = (
-        "The old run is stale (record: `reports/a.json`). Another sentence. "
-        "The new run took 3 s (record: `reports/b.json`)."
+# ------------------------------------------------------------------------------------ results page
+@needs_git
+def test_the_results_page_is_generated_from_the_records(page, generated):
+    assert page == generated, (
+        "docs/results.md is not what the records give: run `python studies/results_page.py` and commit it"
     )
-    assert unflagged(b, ["reports/a.json"]) == []
-    assert unflagged(b, ["reports/b.json"]) == ["reports/b.json"]
-    assert unflagged(b.replace("Another sentence. ", ""), ["reports/b.json"]) == []
+    assert rp.problems(page) == []
 
 
-def test_a_study_with_one_record_of_other_code_is_stale():
-    """Negative control: a family study whose records are today's code is fresh; one record computed by
-    another version of one method makes the whole file stale."""
-    from bayespinn.records import today_versions
-
-    today = today_versions(["modal_mcmc", "bpinn"])
-    doc = {"records": [{"code_versions": dict(today)}, {"code_versions": dict(today)}]}
-    assert study_records_fresh(doc) is True
-    doc["records"][1]["code_versions"]["bpinn"] = "0" * 12
-    assert study_records_fresh(doc) is False
-    assert study_records_fresh({"records": [{"code_version": "abc"}]}) is None
-
-
-def test_a_number_without_a_record_is_caught():
-    """Negative control: the checker flags a planted number, and a bullet citing no record."""
-    bullets = [b for b in status_bullets(README.read_text(encoding="utf-8")) if RECORD.search(b)]
-    planted = bullets[0] + " It also took 987.654 s."
-    assert "987.654" in unbacked(planted)
-    assert not RECORD.search("The ensemble is 1.23x wider.")
+def test_the_page_covers_every_kind_of_study(page):
+    cited = set(rp.records())
+    for must in (
+        "reports/paper/coverage.json",
+        "reports/paper/family.json",
+        "reports/paper/table4.json",
+        "reports/paper/table5.json",
+        "reports/paper/table6.json",
+        "reports/paper/girder_pinns/damaged-girder-deflection-snr30.json",
+        "reports/records/exeter-snr10-seed0/summary.json",
+    ):
+        assert must in cited, must
+    for prefix in ("reports/paper/coverage/", "reports/paper/girders/", "reports/paper/fitcheck/"):
+        assert any(r.startswith(prefix) for r in cited), prefix
+    figures = [e.figure for e in rp.entries()]
+    assert len(set(figures)) == len(figures), "two figures of one name"
+    assert len(rp.table_rows(page)) == len(figures) > 300
 
 
-def test_backed_reads_precision_and_percentages():
-    assert backed("0.90", [0.9025]) and backed("90.2", [0.9025]) and backed("361", [361.0])
-    assert backed("-0.42", [-0.4213]) and backed("1.03e9", [1.0336e9])
-    assert not backed("0.91", [0.9025]) and not backed("362", [361.0])
+def _one_row(page: str, figure: str) -> str:
+    (line,) = [ln for ln in page.splitlines() if ln.startswith(f"| {figure} |")]
+    return line
+
+
+def _bump_last_digit(value: str) -> str:
+    """The value with its last printed digit (of the mantissa, for 1.0336e+09) moved by one."""
+    mant = value.split("e")[0]
+    i = max(i for i, ch in enumerate(mant) if ch.isdigit())
+    return value[:i] + str((int(value[i]) + 1) % 10) + value[i + 1 :]
+
+
+@pytest.mark.parametrize(
+    "figure",
+    [
+        "deep ensemble, 30 dB: 90 % intervals holding the truth",  # an integer
+        "deflection, 30 dB, B-PINN: mean z",  # signed, two decimals
+        "Table 4, modal reference, 10 dB: EI mean [N m^2]",  # five significant digits
+    ],
+)
+def test_a_value_changed_in_its_last_digit_is_caught(page, figure):
+    """Negative control: the page with one value's last printed digit changed."""
+    line = _one_row(page, figure)
+    cells = line.split(" | ")
+    cells[1] = _bump_last_digit(cells[1])
+    forged = page.replace(line, " | ".join(cells))
+    assert forged != page
+    found = rp.problems(forged)
+    assert len(found) == 1 and found[0].startswith(f"{figure}: shows")
+
+
+def _pointed_elsewhere(figure: str, key: str) -> list:
+    secs = []
+    for s in rp.sections():
+        es = tuple(dataclasses.replace(e, key=key) if e.figure == figure else e for e in s.entries)
+        secs.append(dataclasses.replace(s, entries=es))
+    assert any(e.key == key for s in secs for e in s.entries)
+    return secs
+
+
+@pytest.mark.parametrize(
+    "figure, nearby",
+    [
+        # the ensemble's hits (92) against the reference's on the same datasets (91), a field beside it
+        (
+            "deep ensemble, 10 dB: 90 % intervals holding the truth",
+            "rows[method=ensemble,snr_db=10].paired_reference.reference_hits",
+        ),
+        # equal values (94 and 94): the key path alone tells them apart
+        (
+            "deep ensemble, 30 dB: 90 % intervals holding the truth",
+            "rows[method=ensemble,snr_db=30].paired_reference.reference_hits",
+        ),
+        # the family's mean z (-0.02) against the mean z of the bridges with alpha >= 0.04 (-0.04)
+        (
+            "deflection, 30 dB, deep ensemble: mean z",
+            'studies.deflection-snr30.criteria.ensemble.by_alpha."alpha>=0.04".mean_z',
+        ),
+    ],
+)
+def test_an_entry_pointed_at_a_nearby_field_is_caught(page, figure, nearby):
+    """Negative control: the spec's entry pointed at a neighbouring field of similar magnitude."""
+    secs = _pointed_elsewhere(figure, nearby)
+    found = rp.problems(page, secs)
+    assert len(found) == 1 and found[0].startswith(f"{figure}: cites")
+    assert rp.render(secs) != rp.render()
+
+
+def test_the_readme_quotes_no_figures_and_links_the_results():
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    assert "docs/results.md" in text
+    assert not re.search(r"reports/(paper|records)/[\w./-]+\.json", text), "README cites a record"
+    assert "## Status" not in text
+
+
+def test_user_documents_name_no_issue_numbers():
+    for p in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        hits = re.findall(r"issues?\s*#?\d+", p.read_text(encoding="utf-8"), flags=re.I)
+        assert not hits, (p.name, hits)
+
+
+# ------------------------------------------------------------------------------------- key paths
+DOC = {
+    "rows": [
+        {"method": "modal_mcmc", "snr_db": None, "hits": 1},
+        {"method": "modal_mcmc", "snr_db": 10.0, "hits": 2, "ci": [3.0, 4.0]},
+        {"method": "ensemble", "snr_db": 10.0, "hits": 5},
+    ],
+    "coverage": {"EI_segments[0]": {"hits": 7}},
+}
+
+
+def test_a_key_path_names_exactly_one_field():
+    assert records.get(DOC, "rows[method=modal_mcmc,snr_db=10].hits") == 2
+    assert records.get(DOC, "rows[method=modal_mcmc,snr_db=null].hits") == 1
+    assert records.get(DOC, "rows[1].ci[1]") == 4.0
+    assert records.get(DOC, 'coverage."EI_segments[0]".hits') == 7
+    for bad in (
+        "rows[method=modal_mcmc].hits",  # two rows match
+        "rows[method=bpinn].hits",  # none
+        "rows[7].hits",
+        "rows[0].misses",
+        "coverage.EI_segments[0].hits",  # unquoted: a field EI_segments, then an index
+        "rows..hits",
+    ):
+        with pytest.raises(KeyError):
+            records.get(DOC, bad)
+
+
+@needs_git
+def test_an_older_record_loads_with_its_commit_and_a_date():
+    """A run folder written before records carried a date: its commit's date stands in for it."""
+    man = records.load(ROOT / "reports/records/exeter-snr10-seed0/manifest.json")
+    assert "date" not in man and man["git_commit"]
+    prov = records.provenance_of("reports/records/exeter-snr10-seed0/summary.json", "methods", ROOT)
+    assert prov["commit"] == man["git_commit"][:12]
+    assert re.fullmatch(r"\d{4}-\d{2}-\d{2}, (commit date|committed)", prov["date"])
+    assert prov["machine"].endswith("2 cores")
 
 
 # ------------------------------------------------------------------------------------------ pages
@@ -219,20 +209,19 @@ PAGES = ("coverage", "table4", "table5", "table6", "family", "girders", "girder_
 
 @pytest.fixture(scope="module")
 def render():
-    sys.path.insert(0, str(ROOT / "studies"))  # the study scripts import each other by name
     import render as r
 
     return r
 
 
-@pytest.mark.parametrize("page", PAGES)
-def test_committed_pages_are_what_todays_code_renders(page, render):
+@pytest.mark.parametrize("name", PAGES)
+def test_committed_pages_are_what_todays_code_renders(name, render):
     out = ROOT / "reports" / "paper"
-    text = render.page_text(page, out)
+    text = render.page_text(name, out)
     if text is None:
-        pytest.skip(f"no {page}.json committed")
-    committed = (out / f"{page}.md").read_text(encoding="utf-8")
+        pytest.skip(f"no {name}.json committed")
+    committed = (out / f"{name}.md").read_text(encoding="utf-8")
     assert committed == text, (
-        f"reports/paper/{page}.md is not what today's code renders from {page}.json (its rows' freshness or "
-        "layout changed): run `python studies/render.py --out reports/paper` and commit the pages"
+        f"reports/paper/{name}.md is not what today's code renders from {name}.json: run "
+        "`python studies/render.py --out reports/paper` and commit the pages"
     )

@@ -224,14 +224,28 @@ def test_coverage_modal(tmp_path):
     again = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}["modal_mcmc"]
     assert again["replicates"] == 4 and again["resumed_replicates"] == 3
     assert load(tmp_path / again["file"])["records"][:3] == full["records"]
-    assert again["code"] == "today's code"
-    # a study file rewritten without its row being merged (a run stopped in a later level, before rows
-    # were merged level by level) must not lend the row its freshness
+    # each replicate names its commit; the row says which commits its replicates came from
+    from bayespinn.provenance import commits, commits_text
+
+    counts = commits(load(tmp_path / again["file"])["records"])
+    assert sum(counts.values()) == 4
+    assert again["code"] == ("replicates at " + commits_text(counts)) or set(counts) == {
+        "unrecorded"
+    }
+    # a replicate of an older commit, resumed: it is kept and counted under its own commit
     f = tmp_path / again["file"]
+    old = load(f)
+    old["records"][0].update(git_commit="0123456789abcdef", git_dirty=False)
+    f.write_text(json.dumps(old), encoding="utf-8")
+    study("coverage.py", "--report-only", "--out", str(tmp_path), "--quiet")
+    row = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}["modal_mcmc"]
+    assert "0123456789ab (1)" in row["code"]
+    # a study file rewritten without its row being merged (a run stopped in a later level, before rows
+    # were merged level by level) must not lend the row its commits
     f.write_text(json.dumps(dict(load(f), hits=(again["hits"] + 1) % 5)), encoding="utf-8")
     study("coverage.py", "--report-only", "--out", str(tmp_path), "--quiet")
     row = {r["method"]: r for r in load(tmp_path / "coverage.json")["rows"]}["modal_mcmc"]
-    assert row["code"].startswith("stale: the row's numbers are not those of")
+    assert row["code"].startswith("the row's numbers are not those of")
 
 
 def test_bad_method_is_bad_usage(tmp_path):
@@ -464,3 +478,47 @@ def test_gpu_compare_sets_the_studies_side_by_side_on_the_datasets_both_ran(tmp_
     assert res["gpu_vs_reference"]["sd_z"] == pytest.approx(0.1)  # z = 0, 0.1, -0.1
     assert res["sd_z_ratio_to_cpu"] == pytest.approx(0.1 / np.std([0.1, 0.0, -0.2], ddof=1))
     assert res["median_sd_ratio_ratio_to_cpu"] == pytest.approx(1.0)
+
+
+def test_rerun_lists_every_cited_study_with_its_expected_time():
+    """`studies/rerun.py --dry-run` runs nothing and lists one job per record the results page cites (or
+    says why a record is kept as it is), each with its expected time from its record; --only picks one,
+    and an unknown name is bad usage."""
+    sys.path.insert(0, str(REPO / "studies"))
+    import rerun
+    import results_page
+
+    state = REPO / "reports" / ".rerun-state.json"
+    before = state.read_text(encoding="utf-8") if state.exists() else None
+    made = {j.record for j in rerun.jobs()}
+    for rec in results_page.records():
+        sibling = rec.replace("manifest.json", "summary.json")
+        covered = rec in made or sibling in made or rec in rerun.KEPT
+        covered = covered or rec.endswith(
+            ("coverage.json", "family.json")
+        )  # pages of re-run studies
+        assert covered, f"no job re-runs {rec}"
+    fam = {j.record for j in rerun.jobs() if j.name.startswith("family-")}
+    assert {f"reports/paper/family/{s}.json" for s in ("deflection-snr30", "strain-snr30")} <= fam
+    r = subprocess.run(
+        [sys.executable, "studies/rerun.py", "--dry-run"], capture_output=True, text=True, cwd=REPO
+    )
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    jobs = [ln for ln in lines if ": expected " in ln]
+    assert len(jobs) == len(rerun.jobs()) and all(" on " in ln for ln in jobs)
+    assert any(ln.startswith("coverage-ensemble-snr30: expected ") and "h" in ln for ln in jobs)
+    assert (
+        "--resume" not in r.stdout
+    )  # a re-run starts each study afresh, resumable by its checkpoint
+    one = subprocess.run(
+        [sys.executable, "studies/rerun.py", "--dry-run", "--only", "table4"],
+        capture_output=True, text=True, cwd=REPO,
+    )  # fmt: skip
+    assert one.returncode == 0 and one.stdout.count(": expected ") == 1
+    bad = subprocess.run(
+        [sys.executable, "studies/rerun.py", "--dry-run", "--only", "no-such-study"],
+        capture_output=True, text=True, cwd=REPO,
+    )  # fmt: skip
+    assert bad.returncode == 2 and "no-such-study" in bad.stderr and "Traceback" not in bad.stderr
+    assert (state.read_text(encoding="utf-8") if state.exists() else None) == before  # no state

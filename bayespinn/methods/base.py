@@ -60,8 +60,8 @@ class Method:
 
     Class attributes: `name` (CLI), `key` (summary.json and the posterior file), `display` (reports),
     `colour` (figures), `reference` (True for the exact reference the others are judged against),
-    `Settings` (its frozen settings class) and `modules` (the modules whose code decides its numbers,
-    for `bayespinn.codeversion`; default: the class's own module).
+    `Settings` (its frozen settings class) and `modules` (the modules whose code decides its numbers;
+    default: the class's own module).
     """
 
     name: ClassVar[str]
@@ -108,16 +108,14 @@ class Method:
         with white noise."""
         m = config.model
         if m.noise != "iid":
-            raise InputError(
-                "model.noise", m.noise, "'iid' (the AR(1) likelihood is not built yet: issue 23)"
-            )
+            raise InputError("model.noise", m.noise, "'iid' (this method has no AR(1) likelihood)")
         if not self.real_crossings:  # a speed, entry time, damping or forces to infer, or crossings
             from ..crossings import refuse_crossings
 
             refuse_crossings(config, data, self.display)
         if self.real_girders:
             return
-        why = f"for {self.display}, which describes uniform, pinned girders under known loads (issue 24)"
+        why = f"for {self.display}, which describes uniform, pinned girders under known loads"
         if m.EI_segments != 1:
             raise InputError(
                 "model.EI_segments", m.EI_segments, f"1 {why}; --method modal infers it"

@@ -5,8 +5,9 @@ true EI from the prior), runs one method, and records whether the interval holds
 rank of the truth among the posterior draws. Replicates are seeded by study seed, SNR level and index,
 so the result does not depend on the executor or the number of workers, the datasets of two SNR levels
 are independent, and all methods at one level see the same datasets (so each can be set beside the
-reference posterior of the very same data). Every record carries the code version that computed it
-(`bayespinn.codeversion`), and a resumed study refuses records of other code unless asked to mix.
+reference posterior of the very same data). Every replicate's record carries the git commit of the code
+that computed it (`bayespinn.provenance`), so a study resumed over several sessions says which commits
+contributed how many replicates.
 """
 
 from __future__ import annotations
@@ -18,7 +19,6 @@ import logging
 import os
 import time
 import zlib
-from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,12 +26,12 @@ import numpy as np
 from scipy import stats
 
 from .. import methods, seeding
-from ..codeversion import _module_digest, method_version
 from ..config import Config, snr_label
 from ..data.synthetic import simulate
 from ..errors import InputError
 from ..executor import Executor, task_resources
 from ..options import RunOptions
+from ..provenance import commits, record_commit
 
 log = logging.getLogger(__name__)
 
@@ -58,12 +58,6 @@ def replicate_seed(seed: int, snr_db: float | None, index: int) -> np.random.See
     """The seed of replicate `index` at `snr_db`: independent across levels and replicates."""
     level = zlib.crc32(snr_label(snr_db).encode())
     return seeding.child(seeding.child(seed, "coverage", level), "coverage", index)
-
-
-def coverage_version(method: str) -> str:
-    """Code version of a coverage record: the method's code, the simulator and this driver."""
-    h = hashlib.sha256(f"{method_version(method)}:{_module_digest(__name__)}".encode())
-    return h.hexdigest()[:12]
 
 
 def _dataset(task: Replicate):
@@ -137,7 +131,7 @@ def _score(task: Replicate, cfg: Config, post) -> dict:
         "rel_error_pct": float(100 * (d.mean() - true) / true),
         "sd_rel_pct": float(100 * d.std(ddof=1) / true),
         "converged": bool(post.diagnostics.get("converged", True)),
-        "code_version": coverage_version(task.method),
+        **record_commit(),
     }
 
 
@@ -201,11 +195,17 @@ def fingerprint(
 
 class Checkpoint:
     """Finished replicates of one study, one JSON line each after a header line with the study's fingerprint,
-    appended and flushed as each replicate ends, so an interrupted study resumes where it stopped."""
+    appended and flushed as each replicate ends, so an interrupted study resumes where it stopped.
+
+    Opening reads the file and writes nothing: the file is rewritten (the resumed replicates, without lines
+    a crash cut short, or afresh when it belonged to another study) only when the first new replicate is
+    added. A study refused or stopped before it finished any replicate therefore leaves the file exactly as
+    it found it, and the next run resumes from the same replicates."""
 
     def __init__(self, path: str | Path, key: str, earlier: dict[int, dict] | None = None):
         self.path, self.key = Path(path), key
         self.done: dict[int, dict] = dict(earlier or {})
+        self._rewritten = False
         if self.path.exists():
             lines = self.path.read_text(encoding="utf-8").splitlines()
             head = json.loads(lines[0]) if lines else {}
@@ -219,15 +219,26 @@ class Checkpoint:
                 log.info("resuming from %s: %d replicates already done", self.path, len(self.done))
             else:
                 log.warning("%s belongs to a different study; starting afresh", self.path)
+
+    def _rewrite(self) -> None:
+        from .posterior import jsonable
+
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        with self.path.open("w", encoding="utf-8") as fh:  # rewrite: drops torn lines
-            fh.write(json.dumps({"fingerprint": key}) + "\n")
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with tmp.open("w", encoding="utf-8") as fh:
+            fh.write(json.dumps({"fingerprint": self.key}) + "\n")
             for rec in self.done.values():
-                fh.write(json.dumps(rec) + "\n")
+                fh.write(json.dumps(jsonable(rec)) + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        tmp.replace(self.path)  # never a half-written checkpoint
+        self._rewritten = True
 
     def add(self, rec: dict) -> None:
         from .posterior import jsonable
 
+        if not self._rewritten:
+            self._rewrite()
         with self.path.open("a", encoding="utf-8") as fh:
             fh.write(json.dumps(jsonable(rec)) + "\n")
             fh.flush()
@@ -268,125 +279,6 @@ def study_options(method: str, snr_db, opts: RunOptions | None) -> RunOptions:
     return opts
 
 
-#: what a replay compares: every field of a replicate's record but the code version that computed it
-REPLAYED_FIELDS = ("EI_true", "hit", "interval", "rank", "rel_error_pct", "sd_rel_pct", "converged")
-
-
-def replay(
-    study: dict,
-    method: str,
-    cfg: Config,
-    *,
-    indices: list[int],
-    opts: RunOptions | None = None,
-    executor: Executor | None = None,
-    progress: bool = False,
-) -> dict:
-    """Re-run replicates `indices` of a study written earlier (`coverage_study`'s JSON) with today's code and
-    compare each record with the stored one, field by field, exactly.
-
-    A study computed by older code is stale (`coverage_version`); when today's code reproduces its
-    replicates bit for bit, the change did not touch what they compute (a refactor), and the study stands
-    for today's code on the strength of this certificate. The replicates' settings must be the study's:
-    the fingerprint of `method`, `cfg`, `opts` and the study's seed, SNR, level and truth must equal the
-    file's, else InputError. Returns the certificate: the study's fingerprint and code versions, today's,
-    the indices replayed, `identical`, and every difference found.
-    """
-    snr_db, seed, level, truth = (study.get(k) for k in ("snr_db", "seed", "level", "truth"))
-    opts = study_options(method, snr_db, opts)
-    key = fingerprint(method, cfg, snr_db, seed, level, truth, opts)
-    if key != study.get("fingerprint"):
-        raise InputError(
-            "replay",
-            study.get("fingerprint"),
-            f"a study of these settings (their fingerprint is {key}: same method, configuration, options, "
-            "seed, SNR, level and truth)",
-        )
-    stored = {int(r["index"]): r for r in study["records"]}
-    missing = [i for i in indices if i not in stored]
-    if missing:
-        raise InputError(
-            "replay", missing, f"replicate indices of the study (0 to {study['replicates'] - 1})"
-        )
-    tasks = [Replicate(i, method, cfg, snr_db, seed, level, truth, opts) for i in indices]
-    new = (executor or Executor()).map(
-        run_replicate,
-        tasks,
-        desc=f"replay {method}",
-        progress=progress,
-        resources=task_resources(opts.device if method != "modal" else "cpu"),
-    )
-    from .posterior import jsonable
-
-    diffs = {}
-    for rec in new:
-        old, now = stored[rec["index"]], json.loads(json.dumps(jsonable(rec)))  # as a file holds it
-        d = {f: [old.get(f), now.get(f)] for f in REPLAYED_FIELDS if old.get(f) != now.get(f)}
-        if d:
-            diffs[str(rec["index"])] = d
-    return {
-        "schema": "bayespinn.coverage.replay/1",
-        "method": study.get("method"),
-        "snr_db": snr_db,
-        "fingerprint": key,
-        "study_code_versions": study.get("code_versions") or {str(study.get("code_version")): None},
-        "code_version": coverage_version(method),
-        "indices": list(indices),
-        "fields": list(REPLAYED_FIELDS),
-        "identical": not diffs,
-        "differences": diffs,
-    }
-
-
-def replay_vouches(study: dict, certificate: dict | None, today: str) -> bool:
-    """Does an identical replay by today's code stand for this study? (every replicate of the study was
-    computed by one code version, the one the replay reproduced)"""
-    if (
-        not certificate
-        or not certificate.get("identical")
-        or certificate.get("code_version") != today
-    ):
-        return False
-    versions = set((study.get("code_versions") or {}).keys())
-    return (
-        certificate.get("fingerprint") == study.get("fingerprint")
-        and len(versions) == 1
-        and versions == set(certificate.get("study_code_versions") or {})
-        and len(certificate.get("indices") or []) > 0
-    )
-
-
-def replay_path(study_path: str | Path) -> Path:
-    """Where a study file's replay certificate lives: beside it, <name>.replay.json."""
-    p = Path(study_path)
-    return p.with_name(p.name.removesuffix(".json") + ".replay.json")
-
-
-def study_freshness(study_path: str | Path) -> tuple[bool, str]:
-    """(fresh, how): was this study file computed by today's code, directly or vouched for by an identical
-    replay (`replay`) whose certificate lies beside it?"""
-    from .. import methods
-
-    doc = json.loads(Path(study_path).read_text(encoding="utf-8"))
-    cls = methods.by_key(doc.get("method"))
-    if cls is None:
-        return False, f"no registered method has the key {doc.get('method')!r}"
-    today = coverage_version(cls.name)
-    versions = doc.get("code_versions") or {}
-    if set(versions) == {today}:
-        return True, "today's code"
-    cert_path = replay_path(study_path)
-    cert = json.loads(cert_path.read_text(encoding="utf-8")) if cert_path.is_file() else None
-    if replay_vouches(doc, cert, today):
-        return True, f"replayed: {len(cert['indices'])} replicates identical with today's code"
-    if today in versions:
-        return (
-            False,
-            f"mixed: {versions[today]} of {doc.get('replicates')} replicates by today's code",
-        )
-    return False, f"computed by code {doc.get('code_version')}, today's is {today}"
-
-
 def coverage_study(
     method: str,
     cfg: Config,
@@ -401,7 +293,6 @@ def coverage_study(
     progress: bool = True,
     checkpoint: str | Path | None = None,
     resume_from: str | Path | None = None,
-    mix_versions: bool = False,
 ) -> dict:
     """Run the study; returns the contract's coverage JSON (plus per-replicate records and the study's
     `fingerprint`).
@@ -409,9 +300,8 @@ def coverage_study(
     checkpoint : a file that keeps every finished replicate; a study started again with the same settings
         reuses them and runs only the rest (the caller removes it once the result is written)
     resume_from : a study file written earlier (this function's JSON); its replicates are reused when it is
-        the same study (`earlier_records`), e.g. to run 30 replicates over two sessions
-    mix_versions : keep resumed replicates computed by other code than today's (recorded in the result's
-        `code_versions` and `mixed_versions`); without it such replicates are refused (InputError)
+        the same study (`earlier_records`), e.g. to run 30 replicates over two sessions, whichever commit
+        computed them: each record names its own (`commits` counts them)
     """
     t0 = time.perf_counter()
     methods.get(method)  # InputError naming --method for an unknown one
@@ -426,25 +316,6 @@ def coverage_study(
     earlier = earlier_records(resume_from, key) if resume_from is not None else {}
     ck = Checkpoint(checkpoint, key, earlier) if checkpoint else None
     have = ck.done if ck else earlier
-    version = coverage_version(method)
-    other = sorted(
-        i for i, r in have.items() if i < replicates and r.get("code_version") != version
-    )
-    if other and not mix_versions:
-        src = " and ".join(str(p) for p in (resume_from, checkpoint) if p is not None)
-        raise InputError(
-            "--mix-versions",
-            "off",
-            f"resumed replicates of today's code ({version}): {len(other)} of the {len(have)} in {src} were "
-            "computed by other code; pass --mix-versions to keep them (the study records it), or remove them "
-            "to start afresh",
-        )
-    if other:
-        log.warning(
-            "mixing code versions: %d resumed replicates were computed by other code than %s",
-            len(other),
-            version,
-        )
     tasks = [
         Replicate(i, method, cfg, snr_db, seed, level, truth, opts)
         for i in range(replicates)
@@ -462,7 +333,6 @@ def coverage_study(
             on_result=(lambda i, r: ck.add(r)) if ck else None,
         )
     recs = sorted([have[i] for i in range(replicates) if i in have] + new, key=lambda r: r["index"])
-    versions = Counter(str(r.get("code_version")) for r in recs)
     hits = int(sum(r["hit"] for r in recs))
     ranks = np.array([r["rank"] for r in recs])
     p = float(stats.kstest(ranks, "uniform").pvalue) if replicates > 1 else float("nan")
@@ -485,9 +355,7 @@ def coverage_study(
         "acceptance_99": list(binomial_acceptance(replicates, level)),
         "converged_fraction": float(np.mean([r["converged"] for r in recs])),
         "resumed_replicates": sum(1 for i in range(replicates) if i in have),
-        "code_version": version,
-        "code_versions": dict(versions),
-        "mixed_versions": len(versions) > 1,
+        "commits": commits(recs),
         "seeding": SEEDING,
         "power_vs_80": power(replicates, level),
         "verdict": verdict(hits, replicates, level),

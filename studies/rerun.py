@@ -1,0 +1,319 @@
+"""Re-run every study the results page cites, with today's code, then regenerate the pages.
+
+Each job is one command that rewrites one committed record (a coverage study, a family of bridges, a girder
+or fit-check study, one of the paper's tables, a run folder under reports/records). Before starting, each
+job's expected time is printed: the time its record took when it was computed, on the machine the record
+names. The re-run is resumable: `reports/.rerun-state.json` remembers the jobs finished, and a job stopped
+half-way goes on from its study's checkpoint or file when the same command is given again. A study that
+resumes from its own file is started afresh once (its old file removed: the old figures stay in git
+history), so that every replicate of the new record is today's. At the end the study pages
+(`studies/render.py`) and docs/results.md (`studies/results_page.py`) are regenerated.
+
+    python studies/rerun.py --dry-run            # list the jobs and their expected times
+    python studies/rerun.py --only family-deflection-snr30
+    python studies/rerun.py                      # everything (many hours on a 2-core CPU)
+    python studies/rerun.py --restart            # forget which jobs finished
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+STATE = ROOT / "reports" / ".rerun-state.json"
+PAPER = "reports/paper"
+PY = sys.executable
+
+
+@dataclass(frozen=True)
+class Job:
+    """One command that rewrites `record`; `fresh`: files removed before its first start."""
+
+    name: str
+    command: tuple[str, ...]
+    record: str
+    fresh: tuple[str, ...] = field(default=())
+
+
+def _load(rel: str) -> dict:
+    return json.loads((ROOT / rel).read_text(encoding="utf-8"))
+
+
+def _coverage_jobs() -> list[Job]:
+    """One per row of the coverage table, at its replicate count, started afresh (no --resume)."""
+    out = []
+    for row in _load(f"{PAPER}/coverage.json")["rows"]:
+        from bayespinn import methods
+
+        name = methods.by_key(row["method"]).name
+        snr = f"{row['snr_db']:g}"
+        study = f"{PAPER}/{row['file']}"
+        out.append(
+            Job(
+                f"coverage-{name}-snr{snr}",
+                (PY, "studies/coverage.py", "--methods", name, "--snr", snr,
+                 "--replicates", f"{name}={row['replicates']}", "--out", PAPER, "--quiet"),
+                study,
+                (study + ".partial.jsonl",),
+            )
+        )  # fmt: skip
+    return out
+
+
+#: the family studies the page cites: (case, SNR, bridges)
+FAMILY = (("deflection", "30", 24), ("deflection", "10", 12), ("strain", "30", 6))
+#: the girder studies: (config, case, SNR, replicates)
+GIRDERS = (
+    ("bearings", "deflection", "30", 100),
+    ("damaged-girder", "deflection", "30", 100),
+    ("damaged-girder", "strain", "30", 100),
+    ("uncertain-load", "deflection", "40", 100),
+)
+#: the fit-check studies: (config or None for the Exeter preset, case, SNR levels, replicates, expect)
+FITCHECK = (
+    (None, "deflection", "10,20,30,40", 200, "fits"),
+    (None, "strain", "10,20,30,40", 200, "fits"),
+    ("bearings-as-pinned", "deflection", "30", 100, "misfit"),
+    ("damaged-as-uniform", "strain", "30", 100, "misfit"),
+    ("ar1-strain", "strain", "20", 100, "misfit"),
+    ("ar1-strain-ar1", "strain", "20", 100, "fits"),
+)
+#: records the page cites that no job rewrites, and why: they document another machine or older code
+#: beside a record that is re-run
+KEPT = {
+    "reports/records/exeter-snr10-seed0-xeon/summary.json": "the quick start on another processor",
+    "reports/records/exeter-snr10-seed0-xeon/manifest.json": "the quick start on another processor",
+    "reports/records/exeter-snr20-seed11-amd/summary.json": "the 20 dB run on another processor",
+    "reports/records/exeter-snr20-seed11-amd/manifest.json": "the 20 dB run on another processor",
+    "reports/records/exeter-snr10-seed0-before-halving/summary.json": "the quick start of older code",
+    "reports/records/exeter-snr10-seed0-before-halving/manifest.json": "the quick start of older code",
+}
+
+
+def _study_jobs() -> list[Job]:
+    out = []
+    for case, snr, n in FAMILY:
+        study = f"{PAPER}/family/{case}-snr{snr}.json"
+        out.append(
+            Job(
+                f"family-{case}-snr{snr}",
+                (PY, "studies/family.py", "--bridges", str(n), "--snr", snr, "--case", case,
+                 "--time-reference", "--out", PAPER, "--quiet"),
+                study,
+                (study,),
+            )
+        )  # fmt: skip
+    for cfg, case, snr, n in GIRDERS:
+        study = f"{PAPER}/girders/{cfg}-{case}-snr{snr}.json"
+        out.append(
+            Job(
+                f"girders-{cfg}-{case}-snr{snr}",
+                (PY, "studies/girders.py", "--config", f"examples/{cfg}.toml", "--case", case,
+                 "--snr", snr, "--replicates", str(n), "--out", PAPER, "--quiet"),
+                study,
+                (study,),
+            )
+        )  # fmt: skip
+    study = f"{PAPER}/girder_pinns/damaged-girder-deflection-snr30.json"
+    out.append(
+        Job(
+            "girder-pinns-damaged-girder",
+            (PY, "studies/girder_pinns.py", "--config", "examples/damaged-girder.toml", "--snr", "30",
+             "--replicates", "20", "--out", PAPER, "--quiet"),
+            study,
+            (study,),
+        )
+    )  # fmt: skip
+    for cfg, case, levels, n, expect in FITCHECK:
+        stem = f"{cfg or 'exeter'}-{case}-snr{levels.replace(',', '_')}"
+        study = f"{PAPER}/fitcheck/{stem}.json"
+        config = ("--config", f"examples/{cfg}.toml") if cfg else ()
+        out.append(
+            Job(
+                f"fitcheck-{stem}",
+                (PY, "studies/fitcheck.py", "--methods", "modal", *config, "--case", case,
+                 "--snr", levels, "--replicates", str(n), "--expect", expect, "--out", PAPER,
+                 "--quiet"),
+                study,
+                (study,),
+            )
+        )  # fmt: skip
+    for t in ("table4", "table6", "table5"):  # table5 reads table4's run folders
+        out.append(
+            Job(
+                t,
+                (
+                    PY,
+                    f"studies/{t}.py",
+                    "--methods",
+                    "modal,ensemble,bpinn",
+                    "--out",
+                    PAPER,
+                    "--quiet",
+                ),
+                f"{PAPER}/{t}.json",
+            )
+        )
+    return out
+
+
+def _run_jobs() -> list[Job]:
+    """The run folders under reports/records, each by the command its manifest recorded."""
+    import results_page
+
+    out = []
+    for name, _, _ in results_page.RUNS:
+        summary = f"reports/records/{name}/summary.json"
+        if summary in KEPT:
+            continue
+        argv = list(_load(f"reports/records/{name}/manifest.json")["command"])[1:]
+        keep, skip = [], False
+        for (
+            a
+        ) in argv:  # the recorded --out was wherever the run was made; the record's folder is here
+            if skip:
+                skip = False
+            elif a == "--out":
+                skip = True
+            elif not a.startswith("--out="):
+                keep.append(a)
+        out.append(
+            Job(
+                f"run-{name}",
+                (PY, "-m", "bayespinn", *keep, "--out", f"reports/records/{name}"),
+                summary,
+            )
+        )
+    return out
+
+
+def jobs() -> list[Job]:
+    """Every job, cheapest kinds first."""
+    return _run_jobs() + _study_jobs() + _coverage_jobs()
+
+
+def expected_seconds(job: Job) -> tuple[float | None, str]:
+    """(seconds, how): the time `job`'s record took, from the record itself."""
+    if not (ROOT / job.record).is_file():
+        return None, "its record is not there (a re-run started it afresh)"
+    doc = _load(job.record)
+    if job.record.endswith("summary.json"):
+        man = _load(job.record.replace("summary.json", "manifest.json"))
+        return float(man["timings_s"]["total_s"]), "its analysis time"
+    if doc.get("schema") == "bayespinn.coverage/1":
+        n, resumed = int(doc["replicates"]), int(doc.get("resumed_replicates") or 0)
+        if resumed and resumed < n:
+            return doc["runtime_s"] * n / (
+                n - resumed
+            ), "its last session's rate over every replicate"
+        return float(doc["runtime_s"]), "its run time"
+    if isinstance(doc.get("records"), list) and doc["records"]:
+        recs = doc["records"]
+        t = sum(float(r.get("time_s") or 0.0) for r in recs)
+        t += float((doc.get("time_reference") or {}).get("time_s") or 0.0)
+        return t, "the sum of its replicates' times"
+    if isinstance(doc.get("rows"), list) and any("folder" in r for r in doc["rows"]):
+        return sum(
+            float(r.get("runtime_s") or 0.0) for r in doc["rows"]
+        ), "the sum of its rows' times"
+    return None, "not recorded (it reuses other runs' posteriors)"
+
+
+def _hms(s: float | None) -> str:
+    if s is None:
+        return "n/a"
+    s = int(round(s))
+    return f"{s // 3600}h{s % 3600 // 60:02d}m" if s >= 3600 else f"{s // 60}m{s % 60:02d}s"
+
+
+def _machine(job: Job) -> str:
+    from bayespinn.records import provenance_of
+
+    if not (ROOT / job.record).is_file():
+        return "n/a"
+    doc = _load(job.record)
+    key = (
+        "methods"
+        if job.record.endswith("summary.json")
+        else "rows[0].method"
+        if doc.get("rows")
+        else next(iter(doc))
+    )
+    return provenance_of(job.record, key, ROOT)["machine"]
+
+
+def _state() -> dict:
+    if STATE.is_file():
+        return json.loads(STATE.read_text(encoding="utf-8"))
+    return {"started": [], "done": []}
+
+
+def _save(state: dict) -> None:
+    from bayespinn.data.measurements import atomic_write_text
+
+    atomic_write_text(STATE, json.dumps(state, indent=1) + "\n")
+
+
+def regenerate() -> None:
+    """The study pages and docs/results.md from the records now on disk."""
+    subprocess.run([PY, "studies/render.py", "--out", PAPER], cwd=ROOT, check=True)
+    subprocess.run([PY, "studies/results_page.py"], cwd=ROOT, check=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--dry-run", action="store_true", help="list the jobs and their expected times")
+    p.add_argument("--only", action="append", default=[], metavar="NAME",
+                   help="run only this job (repeatable, or a comma list)")  # fmt: skip
+    p.add_argument("--restart", action="store_true", help="forget which jobs finished")
+    args = p.parse_args(sys.argv[1:] if argv is None else argv)
+    todo = jobs()
+    names = [n.strip() for o in args.only for n in o.split(",") if n.strip()]
+    unknown = sorted(set(names) - {j.name for j in todo})
+    if unknown:
+        print(f"rerun.py: error: --only: got {', '.join(unknown)}, expected job names "
+              "(python studies/rerun.py --dry-run lists them)", file=sys.stderr)  # fmt: skip
+        return 2
+    if names:
+        todo = [j for j in todo if j.name in names]
+    state = {"started": [], "done": []} if args.restart else _state()
+    total = 0.0
+    for j in todo:
+        sec, how = expected_seconds(j)
+        total += sec or 0.0
+        mark = " (done)" if j.name in state["done"] else ""
+        print(f"{j.name}{mark}: expected {_hms(sec)} ({how}, on {_machine(j)})")
+        print(f"    {' '.join(['python' if a == PY else a for a in j.command])}")
+    print(f"{len(todo)} jobs, expected {_hms(total)} in all")
+    if args.dry_run:
+        return 0
+    if args.restart:
+        _save(state)
+    for j in todo:
+        if j.name in state["done"]:
+            continue
+        sec, _ = expected_seconds(j)
+        print(f"== {j.name}: starting, expected {_hms(sec)}", flush=True)
+        if j.name not in state["started"]:
+            for f in j.fresh:
+                (ROOT / f).unlink(missing_ok=True)
+            state["started"].append(j.name)
+            _save(state)
+        r = subprocess.run(list(j.command), cwd=ROOT, check=False)
+        if r.returncode != 0:
+            print(f"== {j.name}: exit {r.returncode}; the same command resumes it", file=sys.stderr)
+            return r.returncode
+        state["done"].append(j.name)
+        _save(state)
+    regenerate()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    sys.exit(main())
