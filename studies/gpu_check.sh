@@ -54,7 +54,7 @@ echo "coverage rc=$rc wall_s=$(python3 -c "print(round($end - $start, 1))")" | t
 fi
 
 # EXTEND_FROM=reports/gpu/ensemble-cuda-snr30-r50.json SKIP_MANY=1 SKIP_COV=1: go on from a study file
-# of an earlier session instead (same code version, else the resume refuses it)
+# of an earlier session instead (its replicates keep the commit that computed them)
 if [ -n "${EXTEND_FROM:-}" ]; then
     cp "$EXTEND_FROM" "$OUT/ensemble-cuda-snr30-r100.json"
 elif [ "$rc" = 0 ]; then
