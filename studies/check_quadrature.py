@@ -5,7 +5,7 @@ recorded configuration: the modal model (40 modes) on a fine grid of log EI, sig
 analytically under the log-uniform (Jeffreys) prior of the default ``--noise-prior vague``, times the
 log-normal EI prior. For every method in ``summary.json`` it prints the mean difference in quadrature sds,
 the sd ratio, and the sampler's R-hat and bulk ESS, and exits 1 when the modal reference misses the
-acceptance of the reference-posterior issue (|dmean| <= 0.15 sd, sd within 10 %, R-hat <= 1.01,
+acceptance bands of the reference posterior (|dmean| <= 0.15 sd, sd within 10 %, R-hat <= 1.01,
 ESS >= 400).
 
     python studies/check_quadrature.py reports/runs/deflection-snr10-seed5 [--config bridge.toml]

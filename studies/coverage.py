@@ -297,7 +297,7 @@ def paired_blocks(doc: dict) -> list:
             "The studies share their datasets (same seed, SNR and replicate index), so each PINN posterior can "
             "be set beside the modal reference posterior of the very same data. z: (PINN mean - reference "
             "mean) / reference sd; sd ratio: PINN sd / reference sd. A faithful approximate posterior has z "
-            f"near 0 and sd ratios near 1 (the issues' band is [{lo}, {hi}]). Hits: PINN / reference / "
+            f"near 0 and sd ratios near 1 (the band is [{lo}, {hi}]). Hits: PINN / reference / "
             "datasets missed by both (a miss of both is an extreme dataset, not a fault of the method). "
             "Rank-uniformity p: of the truth's ranks on these datasets, the PINN's and the reference's (small "
             "for both: the datasets place the truth off-centre; small for the PINN alone: the PINN)."

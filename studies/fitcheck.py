@@ -1,4 +1,4 @@
-"""Does the fit check say what it should? Its verdict over independent synthetic datasets (issue 23).
+"""Does the fit check say what it should? Its verdict over independent synthetic datasets.
 
 Replicate i of a study simulates the configuration's true girder (the Exeter preset, or `--config`: EI per
 segment, springs, AR(1) noise, ...) at one of the study's SNR levels (level i mod the number of levels) with
@@ -48,7 +48,7 @@ log = logging.getLogger("studies.fitcheck")
 
 STUDY_SCHEMA = "bayespinn.studies.fitcheck-study/1"
 SCHEMA = "bayespinn.studies.fitcheck/1"
-#: what the issue asks of the verdict: the share of replicates that must get the expected verdict
+#: what is asked of the verdict: the share of replicates that must get the expected verdict
 REQUIRED_SHARE = {"fits": 0.98, "misfit": 0.90}
 EXPECTS = tuple(REQUIRED_SHARE)
 #: the exact (Clopper-Pearson) interval's probability for a share of replicates
@@ -274,7 +274,7 @@ def write_page(out: Path) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    p = c.parser("The fit check's verdict over independent datasets (issue 23).")
+    p = c.parser("The fit check's verdict over independent datasets.")
     p.add_argument(
         "--config",
         default=None,

@@ -1,4 +1,4 @@
-"""Set a GPU coverage study beside the CPU studies of the same datasets (issue 25's GPU figures).
+"""Set a GPU coverage study beside the CPU studies of the same datasets.
 
     python studies/gpu_compare.py reports/gpu/ensemble-cuda-snr30.json [--many reports/gpu/many_networks.json]
 
@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 from bayespinn.provenance import commits  # noqa: E402
 from bayespinn.uq.coverage import binomial_acceptance, paired_with_reference  # noqa: E402
 
-#: the issue's tolerance on sd of z and median sd ratio against the CPU study's
+#: the tolerance on sd of z and median sd ratio against the CPU study's
 TOLERANCE = 0.2
 
 

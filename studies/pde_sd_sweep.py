@@ -1,4 +1,4 @@
-"""Diagnostic (issue 21, strain): how the ensemble members' EI marginals move with the PDE pseudo-sd.
+"""Diagnostic (strain case): how the ensemble members' EI marginals move with the PDE pseudo-sd.
 
     python studies/pde_sd_sweep.py BRIDGE [--case strain] [--profile fast] [--out reports/paper/diagnostics]
 

@@ -1,4 +1,4 @@
-"""Diagnostic (issue 21, strain): is a PINN's offset from the reference explained by the Gaussian load or
+"""Diagnostic (strain case): is a PINN's offset from the reference explained by the Gaussian load or
 by the finite-element data? Modal models stand in for a perfect PINN, in seconds per bridge.
 
     python studies/strain_offset_check.py [--bridges 6] [--case strain] [--out reports/paper/diagnostics]
