@@ -1,139 +1,123 @@
-"""Does the model fit? A check of each method's residuals for structure the model says cannot be there.
+"""Does the model fit? A check of each method's residuals for what the model says cannot be there, naming
+what the data contradict so that a user knows what to do.
 
-Every interval is conditional on the model (a uniform pinned beam, exactly known loads, white Gaussian
-noise). Where the data contradict it, the residuals y - mu at the posterior mean prediction mu keep a trace
-of what the model cannot explain: a smooth shape (a support that resists rotation, a softer segment, a
-missing axle) or a correlation between consecutive samples of a gauge (smoothed or baseline-adjusted
-records). Under the model the residuals are white noise of an unknown sd (less the few directions the fit
-spent), so two scale-free statistics have known distributions whatever sigma is:
+Every interval is conditional on the model (the girder as declared, the stated loads, white or AR(1)
+Gaussian noise of one sd for every sensor). Where the data contradict it, the residuals y - mu at the
+posterior mean prediction mu keep a trace of what the model cannot explain. Three statistics look for the
+three traces a user can act on (`uq.fitcheck_stats` defines them):
 
-* smooth structure: the share of the residuals' energy in a fixed smooth basis, F = ||Q'e||^2 / ||e||^2
-  (Q an orthonormal basis of k smooth functions: products of Legendre polynomials of degree <= 3 in x/L
-  and t/T for scattered deflection points; per gauge, Legendre polynomials of degree <= 7 in t/T for strain
-  series). White noise gives Beta(k/2, (n - k)/2);
-* serial correlation: the lag-1 autocorrelation of the residuals of each gauge's time series, pooled over
-  gauges (scattered points: in time order). White noise gives about N(-1/n, 1/n).
+* `smooth_structure`: residual energy in a smooth basis in time (and position, for scattered points) at the
+  crossing's own time scales, beyond what the fitted noise model leaves there: the model's shape misses the
+  response (a wrong speed or entry time, a bouncing vehicle, a support or a stiffness the model lacks).
+  Under AR(1) noise this is what AR(1) with the fitted coefficient cannot explain: AR(1) noise alone gives
+  the low band no more than its share, however strong its coefficient;
+* `serial_correlation`: consecutive residuals correlated where the model assumes white noise (filtered,
+  smoothed or baseline-adjusted records), or, under AR(1), whitened residuals still correlated over several
+  samples;
+* `one_sensor`: one sensor's residuals much larger than the others' (a gauge off its calibration, its
+  position, or its fixing).
 
-The p-value of each is that of the observed residuals among `REPLICATES` replicates of white noise
-through the same statistic (a posterior predictive check whose replicated residual is scale-free, so it
-does not depend on which sigma was drawn), and the verdict combines them by Bonferroni: `misfit` when
-m x min p < `FALSE_ALARM`. Because a fitted prediction has spent some directions of the noise, the observed
-statistics of a well-specified model are, if anything, smaller than those of white noise: the false-alarm
-rate is at most `FALSE_ALARM` (0.01) by construction; `studies/fitcheck.py` measures it.
+With several crossings (the data's `crossing` labels) the same statistics are taken per crossing, and the
+worst crossing's, taken over crossings, is a statistic too, so one bad crossing among many is not diluted.
 
-With an AR(1) noise model (`[model] noise = "ar1"`) the residuals are first whitened with the posterior median
-coefficient (`uq.ar1.AR1Noise.whiten`): under that model the innovations, not the residuals, are white, and
-both statistics are applied to them.
+Calibration: a parametric bootstrap of the fitted model (`REPLICATES` residual sets: the fitted noise
+model's noise at its fitted sd and coefficient, less the share the fit itself absorbs, the AR(1)
+coefficient refitted), not white noise. The observed residuals and the replicates are exchangeable under
+the fitted model, so each statistic's p-value is its rank, with resolution 1 / (REPLICATES + 1); the
+combined p-value is the rank of the smallest p-value among the replicates' smallest (min-p), so the
+verdict `misfit` (combined p < `FALSE_ALARM`) fires on data the model describes at the rate FALSE_ALARM,
+whatever the number of statistics. `studies/fitcheck_calibration.py` measures that rate for each method.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
 import numpy as np
 
 from ..data.measurements import Measurements
+from . import fitcheck_stats as fs
 
 log = logging.getLogger(__name__)
 
-#: the verdict fires when the Bonferroni-combined p-value falls below this
+#: the verdict fires when the combined p-value falls below this
 FALSE_ALARM = 0.01
-#: white-noise replicates per statistic (p-value resolution 1 / REPLICATES)
-REPLICATES = 2000
-#: posterior draws averaged into the mean prediction
+#: parametric-bootstrap replicates (p-value resolution 1 / (REPLICATES + 1))
+REPLICATES = 999
+#: posterior draws averaged into the mean prediction (their spread gives the fit's hat matrix)
 DRAWS = 200
-#: smooth basis: Legendre degrees in x/L and t/T for scattered points, in t/T per strain gauge
-SCATTER_DEGREE = 3
-SERIES_DEGREE = 7
-#: a basis needs at least this many residuals per column to leave the noise room
-MIN_ROWS_PER_COLUMN = 4
+#: posterior draws (the same for both) of the predictions a time step apart whose difference gives the
+#: timing band's directions, and that step [s]
+TIMING_DRAWS = 32
+TIME_STEP = 1e-3
+#: the reasons a misfit can name, in the order a user should act on them
+REASONS = ("smooth_structure", "serial_correlation", "one_sensor")
 
 
-def _legendre(u: np.ndarray, degree: int) -> np.ndarray:
-    """Legendre polynomials P_0..P_degree at u in [-1, 1], columns."""
-    return np.polynomial.legendre.legvander(np.clip(u, -1.0, 1.0), degree)
-
-
-def _series(data: Measurements) -> list[np.ndarray]:
-    """Row indices of each time series in time order: each strain gauge's, or all scattered points."""
-    sensor = np.asarray(data.sensor).astype(str)
-    strain = np.asarray(data.kind) == "strain"
-    out = []
-    for name in dict.fromkeys(sensor[strain]):
-        rows = np.flatnonzero(strain & (sensor == name))
-        out.append(rows[np.argsort(data.t[rows], kind="stable")])
-    rest = np.flatnonzero(~strain)
-    if rest.size:
-        out.append(rest[np.argsort(data.t[rest], kind="stable")])
-    return [r for r in out if r.size >= 3]
-
-
-def smooth_basis(data: Measurements, length: float, duration: float) -> np.ndarray | None:
-    """Orthonormal columns (n, k) spanning the smooth functions the check looks for, or None when the data
-    are too few to leave the noise room (fewer than MIN_ROWS_PER_COLUMN rows per column)."""
-    n = len(data)
-    strain = np.asarray(data.kind) == "strain"
-    xi = 2.0 * np.asarray(data.x, float) / length - 1.0
-    tau = 2.0 * np.asarray(data.t, float) / max(duration, 1e-300) - 1.0
-    blocks = []
-    rest = np.flatnonzero(~strain)
-    if rest.size:
-        Px, Pt = _legendre(xi[rest], SCATTER_DEGREE), _legendre(tau[rest], SCATTER_DEGREE)
-        B = np.zeros((n, Px.shape[1] * Pt.shape[1]))
-        B[rest] = (Px[:, :, None] * Pt[:, None, :]).reshape(rest.size, -1)
-        blocks.append(B)
-    sensor = np.asarray(data.sensor).astype(str)
-    for name in dict.fromkeys(sensor[strain]):
-        rows = np.flatnonzero(strain & (sensor == name))
-        B = np.zeros((n, SERIES_DEGREE + 1))
-        B[rows] = _legendre(tau[rows], SERIES_DEGREE)
-        blocks.append(B)
-    if not blocks:
+def prediction_draws(
+    post, data: Measurements, draws: int = DRAWS, seed: int = 0
+) -> np.ndarray | None:
+    """Noise-free predictions (draws, P) at the data points (data units) for posterior draws, or None."""
+    if post.predictor is None or len(data) == 0:
         return None
-    B = np.concatenate(blocks, axis=1)
-    if n < MIN_ROWS_PER_COLUMN * B.shape[1]:
-        return None
-    Q, R = np.linalg.qr(B)
-    keep = np.abs(np.diag(R)) > 1e-10 * np.abs(np.diag(R)).max()
-    return Q[:, keep]
-
-
-def smooth_share(Q: np.ndarray, e: np.ndarray) -> np.ndarray:
-    """||Q'e||^2 / ||e||^2 for residual vectors e (n,) or (r, n)."""
-    e = np.atleast_2d(e)
-    return np.sum((e @ Q) ** 2, axis=1) / np.sum(e**2, axis=1)
-
-
-def lag1(series: list[np.ndarray], e: np.ndarray) -> np.ndarray:
-    """Pooled lag-1 autocorrelation of each series' residuals (mean removed per series), for e (n,) or
-    (r, n): sum over series of sum_i d_i d_{i+1} / sum over series of sum_i d_i^2."""
-    e = np.atleast_2d(e)
-    num = np.zeros(e.shape[0])
-    den = np.zeros(e.shape[0])
-    for rows in series:
-        d = e[:, rows]
-        d = d - d.mean(axis=1, keepdims=True)
-        num += np.sum(d[:, 1:] * d[:, :-1], axis=1)
-        den += np.sum(d**2, axis=1)
-    return num / np.where(den > 0, den, 1.0)
+    rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7,)))
+    strain = np.asarray(data.kind) == "strain"
+    out = np.empty((draws, len(data)))
+    for quantity, rows in (("deflection", ~strain), ("curvature", strain)):
+        if rows.any():
+            r = np.asarray(post.predictor(data.x[rows], data.t[rows], quantity, draws, rng), float)
+            r = np.broadcast_to(r, (draws, int(rows.sum()))) if r.shape[0] == 1 else r
+            out[:, rows] = -data.y[rows] * r if quantity == "curvature" else r
+    return out
 
 
 def mean_prediction(
     post, data: Measurements, draws: int = DRAWS, seed: int = 0
 ) -> np.ndarray | None:
     """The posterior mean of the noise-free prediction at the data points (data units), or None."""
-    if post.predictor is None or len(data) == 0:
+    d = prediction_draws(post, data, draws, seed)
+    return None if d is None else d.mean(axis=0)
+
+
+def time_derivative(
+    post, data: Measurements, groups: np.ndarray, seed: int = 0
+) -> np.ndarray | None:
+    """d mu / dt of the posterior mean prediction at the data points, by a central difference of TIME_STEP
+    (one-sided at each crossing's first and last sample: groups labels the rows by crossing), the same
+    posterior draws on both sides; None without a predictor."""
+    t = np.asarray(data.t, float)
+    lo, hi = t.copy(), t.copy()
+    for c in np.unique(groups):
+        m = groups == c
+        lo[m] = np.maximum(t[m] - TIME_STEP, t[m].min())
+        hi[m] = np.minimum(t[m] + TIME_STEP, t[m].max())
+    plus = mean_prediction(post, dataclasses.replace(data, t=hi), TIMING_DRAWS, seed)
+    minus = mean_prediction(post, dataclasses.replace(data, t=lo), TIMING_DRAWS, seed)
+    if plus is None or minus is None:
         return None
-    rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7,)))
-    strain = np.asarray(data.kind) == "strain"
-    mu = np.empty(len(data))
-    for quantity, rows in (("deflection", ~strain), ("curvature", strain)):
-        if rows.any():
-            r = np.asarray(post.predictor(data.x[rows], data.t[rows], quantity, draws, rng), float)
-            m = r.mean(axis=0)
-            mu[rows] = -data.y[rows] * m if quantity == "curvature" else m
-    return mu
+    return (plus - minus) / np.where(hi > lo, hi - lo, np.inf)
+
+
+def _timing(post, data, series, order, blocks, hat, rho, seed, cross) -> list:
+    """Per crossing of the series (in their order): its slice of the series order and its timing band."""
+    groups = np.full(len(data), "") if cross is None else cross
+    d = time_derivative(post, data, groups, seed)
+    out = []
+    start = 0
+    t = np.asarray(data.t, float)
+    for c in dict.fromkeys(s.crossing for s in series):
+        size = sum(s.rows.size for s in series if s.crossing == c)
+        sl = slice(start, start + size)
+        start += size
+        if d is None or not np.all(np.isfinite(d)):
+            out.append((sl, np.zeros((size, 0))))
+            continue
+        m = groups == c
+        D = np.stack([np.where(m, d, 0.0), np.where(m, (t - t[m].min()) * d, 0.0)], axis=1)
+        out.append((sl, fs.timing_band(D[order], sl, hat, rho, blocks)))
+    return out
 
 
 def _noise_ar1(post) -> float | None:
@@ -142,60 +126,310 @@ def _noise_ar1(post) -> float | None:
     return None if r is None else float(np.median(r))
 
 
+def crossings_of(data: Measurements) -> np.ndarray | None:
+    """The data's crossing labels (str), or None for one crossing (no `crossing` column, or one label)."""
+    c = getattr(data, "crossing", None)
+    if c is None:
+        return None
+    c = np.asarray(c).astype(str)
+    return c if np.unique(c).size > 1 else None
+
+
+def p_text(p: float, replicates: int = REPLICATES, floor: float | None = None) -> str:
+    """A p-value as a reader should take it: at the Monte Carlo floor of one statistic, 'p < 1/(n + 1)';
+    at the floor of a combination of several (k of the n + 1 values share it), 'p <= k/(n + 1)'."""
+    one = 1.0 / (replicates + 1)
+    if p <= one * (1 + 1e-9):
+        return f"p < 1/{replicates + 1}"
+    if floor is not None and p <= floor * (1 + 1e-9):
+        return f"p <= {round(p * (replicates + 1))}/{replicates + 1}, its floor"
+    return f"p = {p:.2g}"
+
+
+class _Statistics:
+    """The statistics of the observed residuals (row 0) and of the replicates, by name; names of the
+    form `<reason>` (all data), `<reason>@<crossing>` and `<reason>@worst` (several crossings)."""
+
+    def __init__(
+        self, sums: fs.Sums, series: list[fs.Series], ar1: bool, crossings: list[str], timing: list
+    ):
+        self.values: dict[str, np.ndarray] = {}
+        self.band: dict[str, str] = {}
+        self.sensor_names: dict[str, list[str]] = {}
+        self.sensor_ratios: dict[str, np.ndarray] = {}
+        groups = {"": np.ones(len(series), bool)}
+        if len(crossings) > 1:
+            for c in crossings:
+                groups["@" + c] = np.array([s.crossing == c for s in series])
+        for tag, g in groups.items():
+            if not g.any():
+                continue
+            v, band = fs.smooth_statistic(sums, series, g, timing, crossings)
+            self._add("smooth_structure" + tag, v)
+            self.band[tag] = fs.BANDS[int(band[0])]
+            self._add("serial_correlation" + tag, fs.serial_statistic(sums, series, g, ar1))
+            ratios, names = fs.sensor_statistic(sums, series, g)
+            if names:
+                self._add("one_sensor" + tag, ratios.max(axis=1))
+                self.sensor_names[tag], self.sensor_ratios[tag] = names, ratios[0]
+        if len(crossings) > 1:  # the worst crossing, per reason, is a statistic of its own: the
+            # largest of the crossings' statistics standardised by their replicates' mean and sd
+            for reason in REASONS:
+                cols = [k for k in self.values if k.startswith(reason + "@")]
+                if cols:
+                    V = np.stack([self.values[k] for k in cols], axis=1)
+                    ref = np.where(np.isfinite(V[1:]), V[1:], np.nan)
+                    z = (V - np.nanmean(ref, axis=0)) / np.maximum(np.nanstd(ref, axis=0), 1e-300)
+                    self.values[reason + "@worst"] = np.nanmax(
+                        np.nan_to_num(z, neginf=-1e300), axis=1
+                    )
+
+    def _add(self, name: str, v: np.ndarray) -> None:
+        if np.isfinite(v[0]):
+            self.values[name] = v
+
+
 def check(
     post, data: Measurements, length: float, duration: float, *, seed: int = 0
 ) -> dict | None:
     """The fit check of one method's posterior on the data it explains (module docstring): the contract's
-    `fit_check` entry, or None when the method has no predictor or the data are too few to check."""
-    mu = mean_prediction(post, data, seed=seed)
-    if mu is None or not np.all(np.isfinite(mu)):
-        return None
-    e = np.asarray(data.value, float) - mu
-    rho_noise = _noise_ar1(post)
-    if rho_noise is not None:  # AR(1) noise model: its innovations are what must be white
-        from .ar1 import AR1Noise
+    `fit_check` entry, or None when the method has no predictor or the data are too few to check.
 
-        e = AR1Noise.of(data).whiten(e, rho_noise)
-    n = e.size
-    Q = smooth_basis(data, length, duration)
-    series = _series(data)
-    if Q is None and not series:
+    Keys: verdict, p_value (combined), statistic, residual_autocorr (lag-1, of the whitened residuals under
+    AR(1)), reasons (what a misfit contradicts: "smooth_structure", "serial_correlation",
+    "one_sensor:<name>", "crossing:<name>"; empty when the data fit), detail (one sentence saying so),
+    p_values per reason, p_value_resolution and p_value_se (Monte Carlo), replicates; with several
+    crossings by_crossing {name: {verdict, p_value, reasons}} and worst_crossing."""
+    draws = prediction_draws(post, data, seed=seed)
+    if draws is None or not np.all(np.isfinite(draws)):
         return None
+    mu = draws.mean(axis=0)
+    e = np.asarray(data.value, float) - mu
+    rho_fit = _noise_ar1(post)
+    cross = crossings_of(data)
+    series = fs.layout(data.x, data.t, data.sensor, cross, length, duration)
+    if not series:
+        return None
+    sig = np.asarray(post.sigma, float)
+    sigma = float(np.median(sig[np.isfinite(sig)])) if np.isfinite(sig).any() else float("nan")
+    order, blocks = fs.order_of(series)
+    directions = fs.hat_directions(draws[:, order], sigma, rho_fit, blocks)
+    timing = _timing(post, data, series, order, blocks, directions[0], rho_fit, seed, cross)
     rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(11,)))
-    noise = rng.standard_normal((REPLICATES, n))
-    p, stats = {}, {}
-    if Q is not None:
-        obs = float(smooth_share(Q, e)[0])
-        rep = smooth_share(Q, noise)
-        stats["smooth_share"] = obs
-        stats["smooth_share_white"] = float(Q.shape[1] / n)
-        p["smooth_structure"] = float((1 + np.sum(rep >= obs)) / (1 + REPLICATES))
-    rho = float(lag1(series, e)[0]) if series else float("nan")
-    if series:
-        rep = lag1(series, noise)
-        p["serial_correlation"] = float((1 + np.sum(rep >= rho)) / (1 + REPLICATES))
-    combined = min(1.0, len(p) * min(p.values()))
-    sigma = float(np.median(post.sigma)) if np.isfinite(post.sigma).any() else float("nan")
+    sums, rho_white = fs.bootstrap_sums(e, series, directions, rho_fit, REPLICATES, rng, timing)
+    crossings = list(dict.fromkeys(s.crossing for s in series))
+    st = _Statistics(sums, series, rho_fit is not None, crossings, timing)
+    if not st.values:
+        return None
+    names = list(st.values)
+    P = fs.rank_p(np.stack([st.values[k] for k in names], axis=1))
+    p = dict(zip(names, P[0], strict=True))
+    # the combined p-value (min-p): the verdict's statistics are those of all the data and the worst crossing
+    top = [j for j, k in enumerate(names) if "@" not in k or k.endswith("@worst")]
+    pmin = P[:, top].min(axis=1)
+    combined = float(np.mean(pmin <= pmin[0]))
+    floor = float(np.mean(pmin <= pmin.min()))
+    B = REPLICATES
+    g = np.ones(len(series), bool)
+    rho1 = float(fs.autocorrelations(sums, g)[0, 0])
+    n_basis = sum(s.low.shape[1] + s.mid.shape[1] for s in series)
+    n_timing = sum(G.shape[1] for _, G in timing)
+    n_used = sum(s.rows.size for s in series)
+    smooth_e = float(sums.low[0].sum() + sums.mid[0].sum())
     std = e / sigma if sigma > 0 else e * math.nan
-    return {
-        "verdict": "misfit" if combined < FALSE_ALARM else "fits",
+    verdict = "misfit" if combined < FALSE_ALARM else "fits"
+    by_crossing = _by_crossing(P, names, crossings, st) if len(crossings) > 1 else {}
+    reasons = _reasons(p, st, verdict, by_crossing)
+    out = {
+        "verdict": verdict,
         "p_value": combined,
-        "statistic": (
-            "residuals at the posterior mean prediction against white noise: "
-            + " and ".join(
-                {
-                    "smooth_structure": f"their energy share in {Q.shape[1] if Q is not None else 0} "
-                    "smooth functions of x and t",
-                    "serial_correlation": "their lag-1 autocorrelation in time order",
-                }[k]
-                for k in p
-            )
-            + f"; Bonferroni over {len(p)}, misfit below {FALSE_ALARM:g}"
-        ),
-        "residual_autocorr": rho,
-        "p_values": p,
-        **stats,
+        "statistic": _statistic_text(st, rho_fit is not None, len(crossings), n_basis, n_timing),
+        "residual_autocorr": rho1,
+        "reasons": reasons,
+        "detail": "",
+        "p_values": {k: float(v) for k, v in p.items() if "@" not in k},
+        "p_value_resolution": 1.0 / (B + 1),
+        "p_value_floor": floor,
+        "p_value_se": math.sqrt(max(combined * (1 - combined), 1.0 / (B + 1)) / B),
+        "replicates": B,
+        "null": "ar1" if rho_fit is not None else "white",
+        "hat_directions": int(directions[1].size),
+        "smooth_share": smooth_e / max(float(sums.energy[0].sum()), 1e-300),
+        "smooth_share_white": n_basis / max(n_used, 1),
+        "smooth_band": st.band.get(""),
         "standardised_residual_rms": float(np.sqrt(np.mean(std**2))),
-        **({"noise_ar1": rho_noise, "whitened": True} if rho_noise is not None else {}),
+        **(
+            {"noise_ar1": rho_fit, "whitening_ar1": rho_white, "whitened": True}
+            if rho_fit is not None
+            else {}
+        ),
         "false_alarm": FALSE_ALARM,
     }
+    if "" in st.sensor_names:
+        names_s, ratios = st.sensor_names[""], st.sensor_ratios[""]
+        j = int(np.argmax(ratios))
+        out["worst_sensor"] = {"name": names_s[j], "variance_ratio": float(math.exp(ratios[j]))}
+    if len(crossings) > 1:
+        out["by_crossing"] = by_crossing
+        worst = min(out["by_crossing"], key=lambda c: out["by_crossing"][c]["p_value"])
+        out["worst_crossing"] = worst
+        if "smooth_structure@worst" in p:
+            out["p_values"]["worst_crossing"] = float(
+                min(p[r + "@worst"] for r in REASONS if r + "@worst" in p)
+            )
+    out["detail"] = _detail(out)
+    return out
+
+
+def _reasons(p: dict, st: _Statistics, verdict: str, by_crossing: dict) -> list[str]:
+    """What a misfit contradicts: each reason whose own p-value (all data, or the worst crossing) is
+    below FALSE_ALARM, in REASONS order; the one sensor and the worst crossing named, and when the worst
+    crossing is what fails, its own reasons too."""
+    if verdict != "misfit":
+        return []
+    out = []
+    for r in REASONS:
+        if min(p.get(r, 1.0), p.get(r + "@worst", 1.0)) >= FALSE_ALARM:
+            continue
+        if r == "one_sensor":
+            tag = "" if p.get("one_sensor", 1.0) < FALSE_ALARM else _worst_tag(p, "one_sensor")
+            if tag in st.sensor_names:
+                ratios = st.sensor_ratios[tag]
+                out.append(f"one_sensor:{st.sensor_names[tag][int(np.argmax(ratios))]}")
+        else:
+            out.append(r)
+    worst = [k for k in p if k.endswith("@worst") and p[k] < FALSE_ALARM]
+    if worst:
+        tag = _worst_tag(p, min(worst, key=p.get).split("@")[0])
+        own = by_crossing.get(tag[1:], {}).get("reasons", [])
+        out += [r for r in own if r not in out and r.split(":")[0] not in out]
+        out.append(f"crossing:{tag[1:]}")
+    if not out:  # the combined p fell below the rate through the smallest p-value: name its reason
+        k = min(p, key=p.get).split("@")[0]
+        out.append(k)
+    return out
+
+
+def _worst_tag(p: dict, reason: str) -> str:
+    tags = [k[len(reason) :] for k in p if k.startswith(reason + "@") and not k.endswith("@worst")]
+    return min(tags, key=lambda t: p[reason + t]) if tags else ""
+
+
+def _by_crossing(P, names, crossings, st) -> dict:
+    """Each crossing's own verdict: its statistics' min-p among the replicates'."""
+    out = {}
+    for c in crossings:
+        cols = [j for j, k in enumerate(names) if k.endswith("@" + c)]
+        if not cols:
+            continue
+        pmin = P[:, cols].min(axis=1)
+        pc = float(np.mean(pmin <= pmin[0]))
+        own = {names[j].split("@")[0]: float(P[0, j]) for j in cols}
+        reasons = [r for r in REASONS if own.get(r, 1.0) < FALSE_ALARM]
+        if "one_sensor" in reasons and "@" + c in st.sensor_names:
+            k = st.sensor_names["@" + c][int(np.argmax(st.sensor_ratios["@" + c]))]
+            reasons[reasons.index("one_sensor")] = f"one_sensor:{k}"
+        out[c] = {
+            "verdict": "misfit" if pc < FALSE_ALARM else "fits",
+            "p_value": pc,
+            "p_values": own,
+            "reasons": reasons if pc < FALSE_ALARM else [],
+        }
+    return out
+
+
+def _statistic_text(
+    st: _Statistics, ar1: bool, n_crossings: int, n_basis: int, n_timing: int
+) -> str:
+    parts = [
+        f"energy in {n_basis} smooth functions of time (and position, for scattered points) and in "
+        f"{n_timing} directions of the response shifted or stretched in time, by band",
+        "the lag-1 autocorrelation"
+        if not ar1
+        else f"the autocorrelations at lags 1 to {fs.LAGS} of the whitened residuals",
+    ]
+    if any(k.startswith("one_sensor") for k in st.values):
+        parts.append("the largest ratio of one sensor's residual variance to the others'")
+    noise = "AR(1) noise at its fitted coefficient" if ar1 else "white noise"
+    per = f", for all the data and the worst of {n_crossings} crossings" if n_crossings > 1 else ""
+    return (
+        "residuals at the posterior mean prediction against a parametric bootstrap of the fitted model "
+        f"({REPLICATES} replicates of {noise}, less what the fit absorbs): "
+        + "; ".join(parts)
+        + per
+        + f"; combined by min-p, misfit below {FALSE_ALARM:g}"
+    )
+
+
+def _detail(fc: dict) -> str:
+    """One sentence (or two) saying what the residuals contradict and what to do about it."""
+    B = fc["replicates"]
+    pv = fc["p_values"]
+    noise = (
+        f"AR(1) noise with coefficient {fc['noise_ar1']:.2f}"
+        if fc["null"] == "ar1"
+        else "white noise"
+    )
+    if fc["verdict"] == "fits":
+        text = (
+            f"The residuals are what {noise} leaves after the fit: no smooth structure, serial "
+            f"correlation or single sensor beyond {B} simulated replicates of the fitted model "
+            f"(combined {p_text(fc['p_value'], B, fc['p_value_floor'])})."
+        )
+    else:
+        parts = []
+        for r in fc["reasons"]:
+            if r == "smooth_structure" and fc.get("smooth_band") == "timing":
+                parts.append(
+                    "the residuals keep the shape of the response shifted or stretched in time "
+                    f"({p_text(pv.get(r, fc['p_value']), B)}), which {noise} cannot leave: the stated "
+                    "speed or entry time is off; declare their uncertainty ([vehicle] speed_sd, "
+                    "entry_time_sd)"
+                )
+            elif r == "smooth_structure":
+                parts.append(
+                    "the residuals keep smooth structure at the time scales of the crossing "
+                    f"({p_text(pv.get(r, fc['p_value']), B)}) that {noise} cannot leave: the model's shape "
+                    "misses the response (a wrong speed or entry time, a bouncing vehicle, a support or "
+                    "stiffness the model lacks); declare what is uncertain or change the model"
+                )
+            elif r == "serial_correlation" and fc["null"] == "white":
+                parts.append(
+                    "consecutive residuals are correlated (lag-1 autocorrelation "
+                    f"{fc['residual_autocorr']:+.2f}, {p_text(pv.get(r, fc['p_value']), B)}) where the "
+                    'model assumes white noise: analyse with [model] noise = "ar1" if the records are '
+                    "filtered or smoothed"
+                )
+            elif r == "serial_correlation":
+                parts.append(
+                    "the whitened residuals stay correlated over several samples "
+                    f"({p_text(pv.get(r, fc['p_value']), B)}): the noise is correlated beyond what AR(1) "
+                    "describes (records filtered over several samples)"
+                )
+            elif r.startswith("one_sensor:"):
+                ws = fc.get("worst_sensor") or {}
+                ratio = (
+                    f" ({ws['variance_ratio']:.1f} times the others' residual variance)"
+                    if ws.get("name") == r.split(":", 1)[1]
+                    else ""
+                )
+                parts.append(
+                    f"sensor {r.split(':', 1)[1]} is much worse than the rest{ratio}: check its "
+                    "calibration, position and fixing, or leave it out"
+                )
+            elif r.startswith("crossing:"):
+                c = r.split(":", 1)[1]
+                pc = fc["by_crossing"][c]["p_value"]
+                parts.append(f"crossing {c} fits worst ({p_text(pc, B)})")
+        text = (
+            f"The data contradict the model (combined {p_text(fc['p_value'], B, fc['p_value_floor'])}): "
+            + "; ".join(parts)
+            + "."
+        )
+    if "worst_crossing" in fc and not any(r.startswith("crossing:") for r in fc["reasons"]):
+        c = fc["worst_crossing"]
+        text += (
+            f" Of {len(fc['by_crossing'])} crossings, {c} fits worst "
+            f"({p_text(fc['by_crossing'][c]['p_value'], B)})."
+        )
+    return text
