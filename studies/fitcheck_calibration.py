@@ -182,6 +182,7 @@ class Cell:
             "reasons": fc.get("reasons"),
             "residual_autocorr": fc.get("residual_autocorr"),
             "time_s": time.perf_counter() - t0,
+            "git_commit": self.doc["provenance"]["git_commit"],
         }
         self.doc["records"].append(rec)
         self.doc["records"].sort(key=lambda r: r["index"])
