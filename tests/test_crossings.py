@@ -164,6 +164,7 @@ def test_nothing_declared_is_todays_reference():
         {"vehicle": {"entry_time": 0.3}},
         {"model": {"damping": "inferred"}},
         {"model": {"axle_forces": "fluctuating"}},
+        {"crossing": [{"name": "a", "speed": 7.0}]},
     ],
 )
 def test_declared_nuisances_pick_the_crossing_reference(toml):
@@ -254,3 +255,13 @@ def test_pinn_methods_refuse_what_they_would_ignore(name, toml, key):
     with pytest.raises(InputError) as e:
         method.check(data, cfg)
     assert str(e.value).startswith(key) and "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("name", ["modal", "ensemble", "bpinn"])
+def test_smooth_ei_field_is_refused_by_every_method(name):
+    from bayespinn.methods import get
+
+    cfg = bp.resolve("deflection", {"model": {"EI_field": "smooth"}})
+    with pytest.raises(InputError) as e:
+        get(name)(profile="smoke").check(sample_layout(cfg, 0), cfg)
+    assert str(e.value).startswith("model.EI_field") and "not supported yet" in str(e.value)

@@ -2,6 +2,18 @@
 and the axles' dynamic forces inferred with the priors the user states, for one or several crossings of a
 uniform pinned girder (`reference.crossings_reference`)."""
 
-from .reference import check_crossings, crossings_reference, needs_crossings, refuse_crossings
+from .reference import (
+    check_crossings,
+    check_ei_field,
+    crossings_reference,
+    needs_crossings,
+    refuse_crossings,
+)
 
-__all__ = ["check_crossings", "crossings_reference", "needs_crossings", "refuse_crossings"]
+__all__ = [
+    "check_crossings",
+    "check_ei_field",
+    "crossings_reference",
+    "needs_crossings",
+    "refuse_crossings",
+]

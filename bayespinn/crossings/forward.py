@@ -97,7 +97,7 @@ class CrossingModel:
         self.a_u = np.broadcast_to(np.asarray(a_u, float), (P,)).copy()
         self.a_xx = np.broadcast_to(np.asarray(a_xx, float), (P,)).copy()
         self.n_modes, self.n_basis = int(n_modes), int(n_basis)
-        self.basis_modes = min(self.n_modes, int(basis_modes or n_modes))
+        self.basis_modes = min(self.n_modes, int(n_modes if basis_modes is None else basis_modes))
         self.k = np.arange(1, self.n_modes + 1) * math.pi / self.L  # (N,)
         # distinct sensors (x, a_u, a_xx) and distinct times: modal coordinates once per time
         keys = np.stack([x, self.a_u, self.a_xx], axis=1)
@@ -239,6 +239,12 @@ class CrossingModel:
             ones = np.ones((1, 1, Nb))
             A1 = F * s * np.exp(-1j * beta)[:, :, None] * ones
             A2 = -F * s * np.exp(1j * beta)[:, :, None] * ones
+            # the basis at each distinct time, then at the observations (their times' columns)
+            phi = basis_functions(tau_in, Te, M)[:, :, self.time_of]
+            basis_st = st[:, None, :] * phi
+            if Nb == 0:  # the quasi-static response alone
+                R[:, :, j * M : (j + 1) * M] = np.transpose(basis_st, (0, 2, 1))
+                continue
             e_a = np.exp(-1j * alpha[:, :, None] * tau_in[:, None, :])  # (W, M, U)
             rest = (lam[:, :Nb], omega[:, :Nb], wd[:, :Nb], zeta, Te, e_lam[:, :Nb], e_af[:, :Nb])
             E1 = self._harmonics(
@@ -248,7 +254,7 @@ class CrossingModel:
                 A2, Omega[:, None, :Nb] + a_k, e_om[:, :Nb], np.conj(e_a), *rest, inside, after
             )
             Rj = self._gather(E1 + E2)  # (W, M, P)
-            Rj += st[:, None, :] * basis_functions(np.where(on, tp, 0.0), Te, M)
+            Rj += basis_st
             R[:, :, j * M : (j + 1) * M] = np.transpose(Rj, (0, 2, 1))
         return (mean, R) if basis else mean
 

@@ -31,8 +31,9 @@ class ModalMCMC(Method):
     def check(self, data, config) -> None:
         # Method.check refuses AR(1) noise for the PINN methods; with real_girders it checks nothing else,
         # and this reference describes every [model] (its girder posterior carries the AR(1) likelihood)
-        from ..crossings import check_crossings, needs_crossings
+        from ..crossings import check_crossings, check_ei_field, needs_crossings
 
+        check_ei_field(config)
         if needs_crossings(
             config, data
         ):  # a speed, entry time, damping or forces to infer, or crossings
