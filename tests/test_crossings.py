@@ -230,6 +230,9 @@ def test_smoke_posterior_has_the_contract_keys():
         "t0[crossing]",
     ]
     assert abs(s["speed"]["mean"] / truth.vehicle.speed - 1) < 0.03
+    post = ref.to_inference_data(data).posterior
+    assert {"EI", "sigma", "speed", "entry_time", "damping_ratio"} <= set(post.data_vars)
+    assert post["speed"].shape == post["EI"].shape
 
 
 @pytest.mark.parametrize("name", ["ensemble", "bpinn"])

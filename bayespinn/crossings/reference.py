@@ -335,6 +335,23 @@ class CrossingsReference(Posterior):
         out.pop("crossing_fit_checks", None)
         return out
 
+    def to_inference_data(self, data=None, seed: int = 0):
+        """The base InferenceData with the nuisances' draws in `posterior` beside EI and sigma:
+        damping_ratio, axle_force_sd, axle_force_time_scale, and speed / entry_time (one crossing) or
+        speed_<name> / entry_time_<name> (several)."""
+        import xarray as xr
+
+        idata = super().to_inference_data(data, seed)
+        post = idata.posterior
+        extra = {k: v for k, v in self.nuisance.items() if k != "crossings"}
+        one = len(self.crossing_names) == 1
+        for name, d in self.nuisance.get("crossings", {}).items():
+            for k, v in d.items():
+                extra[k if one else f"{k}_{name}"] = v
+        for k, v in extra.items():
+            post[k] = xr.DataArray(np.asarray(v), dims=("chain", "draw"))
+        return idata
+
 
 def _choose_modes(cfg, data, post_of, th, sigma, start: int = 8, cap: int = 64):
     """The smallest mode count whose predictions at th differ from twice as many by at most
