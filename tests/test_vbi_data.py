@@ -109,10 +109,14 @@ def crossing_cfg():
     )
 
 
-def test_several_crossings_in_one_file():
+def test_several_crossings_in_one_file(tmp_path):
     cfg = crossing_cfg()
     m = vbi_simulate(cfg, 20.0, seed=4, settings=FAST)
     assert m.crossing_names == ("c0", "c1", "slow")
+    m.to_csv(tmp_path / "c.csv")
+    back = read_csv(tmp_path / "c.csv", length=cfg.beam.length)
+    assert np.array_equal(back.crossing, m.crossing) and np.array_equal(back.value, m.value)
+    assert np.array_equal(back.t, m.t) and np.array_equal(back.sensor, m.sensor)
     L = cfg.beam.length
     for c in cfg.crossings:
         rows = m.crossing == c.name

@@ -130,13 +130,13 @@ def solve(
     rho_inf: float = 0.8,
 ) -> Crossing:
     """Integrate a crossing whose first axle enters at t_entry [s], to t_end [s], with n_steps steps
-    over [t_entry, t_end]; the vehicle starts `approach` m before the span (behind its last axle), its
-    bodies at rest on their springs' static length, so they arrive bouncing on a rough road."""
+    over [t_entry, t_end]; a sprung vehicle starts with its first axle `approach` m before the span (the
+    others further back), its bodies at rest on their springs' static length, so that on a rough road
+    they arrive bouncing."""
     ax = Axles.of(vehicle)
     dt = (t_end - t_entry) / n_steps
     J = ax.P.size
-    lead = approach + float(ax.offset.max())
-    m_pre = math.ceil(lead / (ax.speed * dt) - 1e-9) if ax.sprung else 0
+    m_pre = math.ceil(approach / (ax.speed * dt) - 1e-9) if ax.sprung else 0
     am, af, gm, bt = alpha_parameters(rho_inf)
     cg, cb = (1 - af) * gm * dt, (1 - af) * bt * dt * dt
     nd = beam.ndof
