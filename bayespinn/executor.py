@@ -20,6 +20,28 @@ log = logging.getLogger(__name__)
 _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 
 
+def _worker_init(log_level: int | None) -> None:
+    """A local pool worker: one thread (`_single_thread`), and bayespinn's messages to stderr at the
+    parent's level (a worker from the fork server does not inherit the parent's logging handlers)."""
+    _single_thread()
+    if log_level is not None:
+        import sys
+
+        lg = logging.getLogger("bayespinn")
+        if not lg.handlers:
+            h = logging.StreamHandler(sys.stderr)
+            h.setFormatter(logging.Formatter("%(message)s"))
+            lg.addHandler(h)
+        lg.setLevel(log_level)
+        lg.propagate = False
+
+
+def _parent_log_level() -> int | None:
+    """bayespinn's logging level in this process when it has a handler of its own (the CLI's), else None."""
+    lg = logging.getLogger("bayespinn")
+    return lg.level if lg.handlers else None
+
+
 def _single_thread() -> None:
     """Process-wide: one BLAS/OpenMP/torch thread (pool and Ray workers)."""
     for v in _THREAD_VARS:
@@ -75,17 +97,27 @@ def cpu_count() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _context():
-    """How the local pool starts its workers: forked (fast), unless this process has used CUDA, whose
-    autograd threads a forked child cannot inherit (torch refuses): then spawned afresh."""
-    import multiprocessing as mp
-    import sys
+#: modules the fork server imports once, before it forks any worker: the workers then start in
+#: milliseconds (no torch import each) and the server itself never runs autograd
+_PRELOAD = ["torch", "bayespinn.uq.ensemble", "bayespinn.uq.bpinn"]
 
-    torch = sys.modules.get("torch")
-    if torch is not None and torch.cuda.is_initialized():
-        _open_files_limit()  # workers send tensors back as shared memory, one descriptor each
-        return mp.get_context("spawn")
-    return None
+
+def _context():
+    """How the local pool starts its workers: from a fork server (`forkserver`), never by forking this
+    process. Torch refuses a forked child's autograd once the parent has run autograd itself (CUDA in
+    every version; from 2.14 also on the CPU: "Unable to handle autograd's threading in combination with
+    fork-based multiprocessing"), and `run` trains and differentiates in this process before its NUTS
+    chains and ensemble phases go to the pool. The fork server is a fresh interpreter that imports
+    `_PRELOAD` once and forks each worker from itself, so a worker starts clean and fast; where there is
+    no fork server (not POSIX) workers are spawned."""
+    import multiprocessing as mp
+
+    _open_files_limit()  # workers send tensors back as shared memory, one descriptor each
+    if "forkserver" in mp.get_all_start_methods():
+        ctx = mp.get_context("forkserver")
+        ctx.set_forkserver_preload(_PRELOAD)
+        return ctx
+    return mp.get_context("spawn")  # pragma: no cover - not POSIX
 
 
 def _open_files_limit() -> None:
@@ -151,7 +183,10 @@ class Executor:
             return out
         results: list = [None] * len(tasks)
         with ProcessPoolExecutor(
-            max_workers=n, initializer=_single_thread, mp_context=_context()
+            max_workers=n,
+            initializer=_worker_init,
+            initargs=(_parent_log_level(),),
+            mp_context=_context(),
         ) as pool:
             futs = {pool.submit(fn, t): i for i, t in enumerate(tasks)}
             try:

@@ -392,3 +392,35 @@ def test_bench_run_breaks_the_quick_start_down_by_method():
     assert set(r["time_breakdown_s"]) == {"modal_mcmc", "ensemble", "bpinn"}
     walls = [v["wall"] for v in r["time_breakdown_s"].values()]
     assert all(w > 0 for w in walls) and sum(walls) <= r["wall_s"]
+
+
+def _grad_of_cube(x: float) -> float:
+    """d(x^3)/dx by autograd, in whatever process runs it (a pool worker here)."""
+    import torch
+
+    v = torch.tensor(x, dtype=torch.float64, requires_grad=True)
+    (v**3).backward()
+    return float(v.grad)
+
+
+def test_pool_workers_run_autograd_after_the_parent_did():
+    """Torch refuses autograd in a forked child once the parent's autograd engine started its threads (for
+    CUDA in every version; from torch 2.14 also after a torch.compile'd backward on the CPU, as `bench`
+    runs one): the local pool must start its workers some other way. The parent differentiates (compiled
+    where torch.compile works here), then two workers differentiate; with a fork-based pool this fails on
+    torch 2.14.1 with "Unable to handle autograd's threading in combination with fork-based
+    multiprocessing"."""
+    import torch
+
+    from bayespinn.executor import _context
+
+    x = torch.ones(8, requires_grad=True)
+    try:
+        loss = torch.compile(lambda a: (a.sin() ** 2).sum())(x)
+    except Exception:  # noqa: BLE001 - no compiler in this installation: plain autograd
+        loss = (x.sin() ** 2).sum()
+    loss.backward()
+    assert torch.allclose(x.grad, torch.sin(2 * x.detach()))
+    assert _context().get_start_method() in ("forkserver", "spawn")
+    out = Executor("local", workers=2).map(_grad_of_cube, [1.0, 2.0, 3.0, 4.0], progress=False)
+    assert out == [3.0, 12.0, 27.0, 48.0]
