@@ -59,6 +59,112 @@ def _interleaved(
     return {k: statistics.median(v) for k, v in _rounds(steps, device, warmup, repeats).items()}
 
 
+#: aten ops (pointwise) that do two floating-point operations per output element
+_TWO_FLOP = ("addcmul", "addcdiv", "lerp", "addcmul_", "addcdiv_", "lerp_")
+
+
+def _numel(x) -> int:
+    if isinstance(x, torch.Tensor):
+        return x.numel() if x.is_floating_point() else 0
+    if isinstance(x, list | tuple):
+        return sum(_numel(a) for a in x)
+    return 0
+
+
+def count_flops(fn: Callable[[], None]) -> dict:
+    """Floating-point operations of one call of `fn`, counted op by op as torch dispatches them.
+
+    - matmul: torch's own count (`torch.utils.flop_counter.FlopCounterMode`: 2 m k n per product, every
+      mm / bmm / addmm / baddbmm, forward and backward);
+    - elementwise: every other floating-point aten op that torch tags pointwise, one operation per output
+      element (two for addcmul, addcdiv, lerp), reductions (sum, mean, ...) one per input element, the
+      optimiser's foreach ops one per element of their first tensor list.
+
+    Returns {"matmul": FLOPs, "elementwise": FLOPs, "total": FLOPs}. Transcendental functions (tanh, exp)
+    count as one operation, so the total is a lower bound on the work.
+    """
+    from torch.utils._python_dispatch import TorchDispatchMode
+    from torch.utils.flop_counter import FlopCounterMode
+
+    counted = {"elementwise": 0}
+    reductions = ("sum", "mean", "amax", "amin", "max", "min", "norm", "linalg_vector_norm", "prod")
+
+    class _Elementwise(TorchDispatchMode):
+        def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+            out = func(*args, **(kwargs or {}))
+            name = func.overloadpacket.__name__
+            if name.startswith("_foreach_"):
+                counted["elementwise"] += _numel(args[0] if args else ())
+            elif name in reductions:
+                counted["elementwise"] += _numel(args[0] if args else ())
+            elif torch.Tag.pointwise in func.tags:
+                counted["elementwise"] += _numel(out) * (2 if name in _TWO_FLOP else 1)
+            return out
+
+    with FlopCounterMode(display=False) as fc, _Elementwise():
+        fn()
+    mm = int(fc.get_total_flops())
+    return {
+        "matmul": mm,
+        "elementwise": counted["elementwise"],
+        "total": mm + counted["elementwise"],
+    }
+
+
+def matmul_rate(
+    m: int, k: int, n: int, device, dtype=torch.float32, *, seconds: float = 0.5, batch: int = 1
+) -> float:
+    """Measured dense matrix-multiply rate [GFLOP/s] of torch.bmm of (batch, m, k) by (batch, k, n) on
+    `device` in `dtype` with torch's current thread setting: the median of 5 timed blocks, each as many
+    products as fill seconds / 5, after a warm-up."""
+    dev = torch.device(device)
+    g = torch.Generator().manual_seed(0)
+    a = torch.randn(batch, m, k, generator=g, dtype=dtype).to(dev)
+    b = torch.randn(batch, k, n, generator=g, dtype=dtype).to(dev)
+    torch.bmm(a, b)
+    _sync(dev)
+    t0, reps = time.perf_counter(), 0
+    while reps < 3 or time.perf_counter() - t0 < 0.05:
+        torch.bmm(a, b)
+        reps += 1
+    _sync(dev)
+    per = (time.perf_counter() - t0) / reps
+    block = max(1, int(seconds / 5 / max(per, 1e-9)))
+    times = []
+    for _ in range(5):
+        _sync(dev)
+        t0 = time.perf_counter()
+        for _ in range(block):
+            torch.bmm(a, b)
+        _sync(dev)
+        times.append((time.perf_counter() - t0) / block)
+    return 2.0 * batch * m * k * n / statistics.median(times) / 1e9
+
+
+def analytic_matmul_flops(points: int, width: int, depth: int) -> int:
+    """Matrix-multiply FLOPs of one training step of the plain `PINN` (`depth` tanh layers of `width`, one
+    output) on the Taylor-mode residual at `points` points, by hand, to check `count_flops` against.
+
+    The input jet (xi, tau) has a full value (N, 2) and two constant first derivatives (1, 2); after the
+    first layer all K = 1 + 4 + 2 components are full, so each further layer multiplies (K N, w) by (w, w)
+    and the output layer (K N, w) by (w, 1). A product C = A B costs 2 m k n forward; backward, 2 m k n for
+    the weight's gradient and as much again for A's where A depends on the weights (not the first layer's
+    input).
+    """
+    N, w, K = points, width, 1 + 4 + 2
+    first = 2 * N * 2 * w + 2 * (2 * 1 * 2 * w)  # the value and the two constant derivatives
+    hidden = (depth - 1) * 2 * K * N * w * w
+    out = 2 * K * N * w
+    return first + hidden + out + first + 2 * hidden + 2 * out
+
+
+#: products of the step's shape per timed sample of the matrix-multiply rate (about a step's worth of them)
+MATMULS_PER_SAMPLE = 12
+
+#: the large product whose rate `bench_derivatives` reports beside the step's own shape
+LARGE_MATMUL = 2048
+
+
 def _deflection_problem() -> Problem:
     cfg = preset("deflection")
     return Problem.from_config(cfg, sample_layout(cfg, 0))
@@ -74,6 +180,7 @@ def bench_derivatives(
     warmup: int = 3,
     compile: bool | None = None,
     seed: int = 0,
+    large: int = LARGE_MATMUL,
 ) -> dict:
     """Training-step time with nested autograd versus Taylor-mode derivatives.
 
@@ -83,13 +190,16 @@ def bench_derivatives(
     device : 'cpu' or 'cuda'
     repeats, warmup : timed and untimed steps per variant
     compile : also time the Taylor step under torch.compile (default: yes if a compiler works)
+    large : side of the large square product whose rate is reported beside the step's own
 
     Returns
     -------
     dict with points, width, depth, threads, autograd_ms, taylor_ms (eager Taylor mode, the engine's
     default on CPU), speedup = autograd_ms / taylor_ms, max_rel_diff (largest of max|Taylor - autograd|
     / max|autograd| over u, u_xx, u_xxxx, u_t, u_tt at the points, float32), and, when compiled,
-    taylor_compiled_ms, compiled_speedup, compile_s (first compiled step, compilation included).
+    taylor_compiled_ms, compiled_speedup, compile_s (first compiled step, compilation included); and the
+    Taylor step's floor (`step_floor`): gflop_per_step, matmul_gflops, floor_ratio and their parts, with
+    gflop_matmul_analytic (`analytic_matmul_flops`, which the counted gflop_matmul must equal).
     """
     dev = torch.device(device)
     pt = _deflection_problem().tensors(1, dev)
@@ -118,6 +228,16 @@ def bench_derivatives(
         return step
 
     steps = {"autograd": make_step("autograd", "autograd"), "taylor": make_step("taylor", "taylor")}
+    # the step's hidden-layer product, timed in the same rounds (its rate sets the step's floor)
+    shape = ((1 + 4 + 2) * points, width, width)
+    mm_a = torch.randn(1, shape[0], shape[1], generator=g).to(dev)
+    mm_b = torch.randn(1, shape[1], shape[2], generator=g).to(dev)
+
+    def matmuls():
+        for _ in range(MATMULS_PER_SAMPLE):
+            torch.bmm(mm_a, mm_b)
+
+    steps["matmul"] = matmuls
     out: dict = {
         "points": points,
         "width": width,
@@ -149,7 +269,49 @@ def bench_derivatives(
         float((a.dt(k) - b.dt(k)).abs().max() / b.dt(k).abs().max()) for k in (1, 2)
     ]
     out["max_rel_diff"] = max(diffs)
+    mm_ms = med["matmul"] / MATMULS_PER_SAMPLE
+    out.update(step_floor(steps["taylor"], out["taylor_ms"], mm_ms, shape, dev, large))
+    out["gflop_matmul_analytic"] = analytic_matmul_flops(points, width, depth) / 1e9
     return out
+
+
+def step_floor(
+    step: Callable[[], None],
+    step_ms: float,
+    matmul_ms: float,
+    shape,
+    device,
+    large: int = LARGE_MATMUL,
+) -> dict:
+    """The training step's arithmetic floor: its counted floating-point work (`count_flops` of one call of
+    `step`) at this machine's measured matrix-multiply rate, and how far `step_ms` is from it.
+
+    The rate (`matmul_gflops`) is that of the step's own hidden-layer product (`shape` = (m, k, n): the
+    stacked jet, 7 components x the points, times a width x width weight; float32, torch's thread
+    setting), timed as `matmul_ms` in the same rounds as the step; a large square product's rate
+    (side `large`, the machine's best) is reported beside it with its own ratio.
+
+    Returns gflop_per_step (matmul + elementwise, counted), gflop_matmul, gflop_elementwise,
+    matmul_gflops, matmul_shape, matmul_gflops_large, floor_ms = 1000 gflop_per_step / matmul_gflops,
+    floor_ratio = step_ms / floor_ms, floor_ratio_large (the same against the large product's rate).
+    """
+    flops = count_flops(step)
+    gflop = flops["total"] / 1e9
+    m, k, n = shape
+    rate = 2.0 * m * k * n / (matmul_ms * 1e-3) / 1e9
+    big = matmul_rate(large, large, large, device)
+    floor_ms = 1e3 * gflop / rate
+    return {
+        "gflop_per_step": gflop,
+        "gflop_matmul": flops["matmul"] / 1e9,
+        "gflop_elementwise": flops["elementwise"] / 1e9,
+        "matmul_gflops": rate,
+        "matmul_shape": list(shape),
+        "matmul_gflops_large": big,
+        "floor_ms": floor_ms,
+        "floor_ratio": step_ms / floor_ms,
+        "floor_ratio_large": step_ms / (1e3 * gflop / big),
+    }
 
 
 def _member_settings(points: int, width: int, depth: int, optimizer: str) -> TrainSettings:
