@@ -172,19 +172,55 @@ def build_table(
     return tab, err
 
 
+def marginal_scale(cond: Conditional, post, center, h, sigma: float, n_list) -> np.ndarray:
+    """Laplace sds of the shared parameters from the curvature of their Laplace-marginal log posterior at
+    sigma (central differences with steps h, a handful of conditional fits)."""
+    S = center.size
+    pts = [center]
+    for i in range(S):
+        for j in range(i, S):
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                p = center.copy()
+                p[i] += si * h[i]
+                p[j] += sj * h[j]
+                pts.append(p)
+    pts = np.array(pts)
+    full = np.repeat(cond.theta_map[None], len(pts), 0)
+    full[:, cond.shared] = pts
+    sig = np.full(len(pts), sigma)
+    f = -(_shared_prior(post, full) + crossing_loglik(cond.at(pts), cond.own, sig, n_list))
+    H = np.zeros((S, S))
+    k = 1
+    for i in range(S):
+        for j in range(i, S):
+            fpp, fpm, fmp, fmm = f[k : k + 4]
+            k += 4
+            H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
+    try:
+        sd = np.sqrt(np.diag(np.linalg.inv(H)))
+        if np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0):
+            return sd
+    except np.linalg.LinAlgError:
+        pass
+    return 10 * np.asarray(h, float)
+
+
 def laplace_sample(
-    post: CrossingsLogPosterior, theta_map, scale, sigma: float, settings, seed, progress
+    post: CrossingsLogPosterior, theta_map, steps, sigma: float, settings, seed, progress
 ):
     """emcee on (shared parameters, log sigma) under the tabulated Laplace likelihood, then each
-    crossing's (log v, t0) from its Laplace Gaussian per draw. Returns the draws in the joint layout
-    (chain * draw, D), sigma (chain, draw), the chains and diagnostics to add."""
+    crossing's (log v, t0) from its Laplace Gaussian per draw. steps: finite-difference steps of every
+    parameter (the shared ones' curvature). Returns the draws in the joint layout (chain * draw, D), sigma
+    (chain, draw), the chains and diagnostics to add."""
     from .. import seeding
     from ..uq.sampler import sample
 
     cond = Conditional(post, theta_map, sigma)
     S = cond.shared
     n_list = [c.y.size for c in post.terms]
-    table, err = build_table(cond, theta_map[S], np.asarray(scale)[S], sigma, n_list)
+    scale = np.zeros(theta_map.size)
+    scale[S] = marginal_scale(cond, post, theta_map[S], np.asarray(steps, float)[S], sigma, n_list)
+    table, err = build_table(cond, theta_map[S], scale[S], sigma, n_list)
     noise = post.noise_prior
 
     def logp(z: np.ndarray) -> np.ndarray:

@@ -236,16 +236,7 @@ def _least_squares(post: CrossingsLogPosterior, th0: np.ndarray) -> tuple[np.nda
             return np.concatenate([r, _prior_residuals(post, th[0])])
 
         def jac(z, sigma=sigma):
-            h = 1e-6 * np.maximum(1.0, np.abs(z))
-            Z = np.repeat(np.atleast_2d(z), 2 * z.size, 0)
-            for i in range(z.size):
-                Z[2 * i, i] += h[i]
-                Z[2 * i + 1, i] -= h[i]
-            th = full(Z)
-            R = np.concatenate([r for r, _ in post.residuals(th)], axis=1) / sigma
-            P = np.stack([_prior_residuals(post, t) for t in th])
-            F = np.concatenate([R, P], axis=1)
-            return ((F[0::2] - F[1::2]) / (2 * h[:, None])).T
+            return _jacobian(post, full, idx, z, sigma)
 
         fit = least_squares(
             fun, th0[idx], jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=200
@@ -253,6 +244,31 @@ def _least_squares(post: CrossingsLogPosterior, th0: np.ndarray) -> tuple[np.nda
         th0 = th0.copy()
         th0[idx] = fit.x
     return th0, sigma
+
+
+def _jacobian(post: CrossingsLogPosterior, full, idx: list[int], z: np.ndarray, sigma: float):
+    """Central-difference Jacobian of `_least_squares`' residuals: each crossing's rows only against the
+    shared parameters and its own (the rest of its block is zero), one vectorised call per crossing."""
+    names = [post.layout.names[i] for i in idx]
+    h = 1e-6 * np.maximum(1.0, np.abs(z))
+    Z = np.repeat(np.atleast_2d(z), 2 * z.size, 0)
+    for i in range(z.size):
+        Z[2 * i, i] += h[i]
+        Z[2 * i + 1, i] -= h[i]
+    th = full(Z)
+    n_obs = sum(c.y.size for c in post.terms)
+    P = np.stack([_prior_residuals(post, t) for t in th])
+    J = np.zeros((n_obs + P.shape[1], z.size))
+    J[n_obs:] = ((P[0::2] - P[1::2]) / (2 * h[:, None])).T
+    row = 0
+    for ci, c in enumerate(post.terms):
+        need = [k for k, n in enumerate(names) if "[" not in n or n.endswith(f"[{c.name}]")]
+        sel = np.ravel([[2 * k, 2 * k + 1] for k in need])
+        p = post.unpack(th[sel])
+        mu = c.model.predict(p["EI"], p["zeta"], p["v"][ci], p["t0"][ci])
+        J[row : row + c.y.size, need] = (-(mu[0::2] - mu[1::2]) / (2 * h[need, None] * sigma)).T
+        row += c.y.size
+    return J
 
 
 def _prior_residuals(post: CrossingsLogPosterior, th: np.ndarray) -> np.ndarray:
@@ -425,18 +441,18 @@ def crossings_reference(
         if np.isfinite(res.fun) and res.fun < -float(post(th[None])[0]):
             th = res.x
     h = np.array([_step(n, post) for n in L.names])
-    scale = _hessian_scale(post, th, h)
-    s = dataclasses.replace(s, n_walkers=max(s.n_walkers, 2 * L.dim + 2))
     if laplace is None:
         laplace = len(post.terms) > 1
     laplace = bool(laplace) and not forces
     if laplace:  # each crossing's speed and entry time by Laplace inside the shared likelihood
         from .laplace import laplace_sample
 
-        flat, sig, ch, extra = laplace_sample(post, th, scale, sigma, s, seed, progress)
+        flat, sig, ch, extra = laplace_sample(post, th, h, sigma, s, seed, progress)
         shape = sig.shape
         draws = flat.reshape(*shape, L.dim)
     else:
+        scale = _hessian_scale(post, th, h)
+        s = dataclasses.replace(s, n_walkers=max(s.n_walkers, 2 * L.dim + 2))
         ch = sample(post, th, scale, s, seed, progress, desc="crossing MCMC")
         draws = ch.draws  # (chain, draw, D)
         flat = draws.reshape(-1, L.dim)
