@@ -143,7 +143,7 @@ def test_without_its_smooth_statistic_the_check_misses_a_bump(monkeypatch):
 
     def none(sums, series, g, timing, crossings):
         R = sums.energy.shape[0]
-        return np.full(R, -np.inf), np.zeros(R, int)
+        return np.full(R, -np.inf), np.full((R, len(fitcheck.fs.BANDS)), -np.inf)
 
     monkeypatch.setattr(fitcheck.fs, "smooth_statistic", none)
     got = _verdicts(s, 10, rho=0.8, transform=bump)

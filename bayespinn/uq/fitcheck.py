@@ -54,6 +54,15 @@ TIMING_DRAWS = 32
 TIME_STEP = 1e-3
 #: the reasons a misfit can name, in the order a user should act on them
 REASONS = ("smooth_structure", "serial_correlation", "one_sensor")
+#: what each band of smooth structure points to, and what to do (the detail's words)
+SMOOTH_CAUSES = {
+    "timing": "it has the shape of the response shifted or stretched in time, as a stated speed or entry "
+    "time that is off leaves (declare their uncertainty: [vehicle] speed_sd, entry_time_sd)",
+    "mid": "it varies at a vehicle's bounce frequencies, as dynamic axle forces leave (declare them: "
+    '[model] axle_forces = "fluctuating")',
+    "low": "it varies at the crossing's own time scale, as a support, a stiffness or a load the model "
+    "lacks leaves (change the model: springs at the supports, EI per segment)",
+}
 
 
 def prediction_draws(
@@ -154,7 +163,7 @@ class _Statistics:
         self, sums: fs.Sums, series: list[fs.Series], ar1: bool, crossings: list[str], timing: list
     ):
         self.values: dict[str, np.ndarray] = {}
-        self.band: dict[str, str] = {}
+        self.bands: dict[str, float] = {}
         self.sensor_names: dict[str, list[str]] = {}
         self.sensor_ratios: dict[str, np.ndarray] = {}
         groups = {"": np.ones(len(series), bool)}
@@ -164,9 +173,13 @@ class _Statistics:
         for tag, g in groups.items():
             if not g.any():
                 continue
-            v, band = fs.smooth_statistic(sums, series, g, timing, crossings)
+            v, bands = fs.smooth_statistic(sums, series, g, timing, crossings)
             self._add("smooth_structure" + tag, v)
-            self.band[tag] = fs.BANDS[int(band[0])]
+            if tag == "":  # each band's own p-value, to say which kind of shape the residuals keep
+                cols = [j for j in range(bands.shape[1]) if np.isfinite(bands[0, j])]
+                if cols:
+                    P = fs.rank_p(bands[:, cols])[0]
+                    self.bands = {fs.BANDS[j]: float(q) for j, q in zip(cols, P, strict=True)}
             self._add("serial_correlation" + tag, fs.serial_statistic(sums, series, g, ar1))
             ratios, names = fs.sensor_statistic(sums, series, g)
             if names:
@@ -256,7 +269,8 @@ def check(
         "hat_directions": int(directions[1].size),
         "smooth_share": smooth_e / max(float(sums.energy[0].sum()), 1e-300),
         "smooth_share_white": n_basis / max(n_used, 1),
-        "smooth_band": st.band.get(""),
+        "smooth_bands": st.bands,
+        "smooth_band": min(st.bands, key=st.bands.get) if st.bands else None,
         "standardised_residual_rms": float(np.sqrt(np.mean(std**2))),
         **(
             {"noise_ar1": rho_fit, "whitening_ar1": rho_white, "whitened": True}
@@ -379,32 +393,34 @@ def _detail(fc: dict) -> str:
     else:
         parts = []
         for r in fc["reasons"]:
-            if r == "smooth_structure" and fc.get("smooth_band") == "timing":
+            if r == "smooth_structure":
+                bands = fc.get("smooth_bands") or {}
+                hits = [b for b in ("timing", "mid", "low") if bands.get(b, 1.0) < FALSE_ALARM]
+                causes = [SMOOTH_CAUSES[b] for b in hits] or [SMOOTH_CAUSES["low"]]
                 parts.append(
-                    "the residuals keep the shape of the response shifted or stretched in time "
-                    f"({p_text(pv.get(r, fc['p_value']), B)}), which {noise} cannot leave: the stated "
-                    "speed or entry time is off; declare their uncertainty ([vehicle] speed_sd, "
-                    "entry_time_sd)"
-                )
-            elif r == "smooth_structure":
-                parts.append(
-                    "the residuals keep smooth structure at the time scales of the crossing "
-                    f"({p_text(pv.get(r, fc['p_value']), B)}) that {noise} cannot leave: the model's shape "
-                    "misses the response (a wrong speed or entry time, a bouncing vehicle, a support or "
-                    "stiffness the model lacks); declare what is uncertain or change the model"
-                )
-            elif r == "serial_correlation" and fc["null"] == "white":
-                parts.append(
-                    "consecutive residuals are correlated (lag-1 autocorrelation "
-                    f"{fc['residual_autocorr']:+.2f}, {p_text(pv.get(r, fc['p_value']), B)}) where the "
-                    'model assumes white noise: analyse with [model] noise = "ar1" if the records are '
-                    "filtered or smoothed"
+                    "the residuals keep smooth structure "
+                    f"({p_text(pv.get(r, fc['p_value']), B)}) that {noise} cannot leave: "
+                    + "; or ".join(causes)
                 )
             elif r == "serial_correlation":
+                also = "smooth_structure" in fc["reasons"]
+                what = (
+                    "consecutive residuals are correlated (lag-1 autocorrelation "
+                    f"{fc['residual_autocorr']:+.2f}, {p_text(pv.get(r, fc['p_value']), B)})"
+                    if fc["null"] == "white"
+                    else "the whitened residuals stay correlated over several samples "
+                    f"({p_text(pv.get(r, fc['p_value']), B)})"
+                )
+                fix = (
+                    'analyse with [model] noise = "ar1" if the records are filtered or smoothed'
+                    if fc["null"] == "white"
+                    else "the noise is correlated beyond what AR(1) describes (records filtered "
+                    "over several samples)"
+                )
                 parts.append(
-                    "the whitened residuals stay correlated over several samples "
-                    f"({p_text(pv.get(r, fc['p_value']), B)}): the noise is correlated beyond what AR(1) "
-                    "describes (records filtered over several samples)"
+                    f"{what}, as the smooth structure leaves; if it stays once that is explained, {fix}"
+                    if also
+                    else f"{what}: {fix}"
                 )
             elif r.startswith("one_sensor:"):
                 ws = fc.get("worst_sensor") or {}

@@ -236,7 +236,7 @@ def smooth_statistic(
     sums: Sums, series: list[Series], g: np.ndarray, timing: list, crossings: list[str]
 ) -> tuple[np.ndarray, np.ndarray]:
     """Smooth structure in the series g (boolean (S,)): the largest band's standardised F ratio (R,), or
-    -inf where no band has columns, and which band it was (R,) as an index into BANDS."""
+    -inf where no band has columns, and each band's (R, len(BANDS)), -inf for a band without columns."""
     sel = [s for s, k in zip(series, g, strict=True) if k]
     n = sum(s.rows.size for s in sel)
     kl = sum(s.low.shape[1] for s in sel)
@@ -245,18 +245,16 @@ def smooth_statistic(
     tc = [j for j, c in enumerate(crossings) if c in inside]
     kt = sum(timing[j][1].shape[1] for j in tc)
     R = sums.energy.shape[0]
-    out, band = np.full(R, -np.inf), np.zeros(R, int)
+    bands = np.full((R, len(BANDS)), -np.inf)
     if kl + km + kt == 0 or n - kl - km <= 0:
-        return out, band
+        return bands.max(axis=1), bands
     el, em = sums.low[:, g].sum(1), sums.mid[:, g].sum(1)
     et = sums.timing[:, tc].sum(1)
     rest = np.maximum(sums.energy[:, g].sum(1) - el - em, 1e-300) / (n - kl - km)
     for i, (e, k) in enumerate(((et, kt), (el, kl), (em, km))):
         if k:
-            z = (e / k / rest - 1.0) * math.sqrt(k / 2.0)
-            band = np.where(z > out, i, band)
-            out = np.maximum(out, z)
-    return out, band
+            bands[:, i] = (e / k / rest - 1.0) * math.sqrt(k / 2.0)
+    return bands.max(axis=1), bands
 
 
 #: the smooth statistic's bands, as `smooth_statistic` indexes them
