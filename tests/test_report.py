@@ -27,9 +27,12 @@ from bayespinn.uq.modal_mcmc import ModalPredictor
 from bayespinn.uq.posterior import Posterior
 from bayespinn.uq.predictive import fe_truth
 
+#: per-sensor figures of scattered deflection points: one per quarter of the span
+DEFL_SENSORS = tuple(f"fig_sensor_x{k}.png" for k in range(1, 5))
 RUN_FIGURES = (
     "fig_posteriors.png",
     "fig_residuals.png",
+    *DEFL_SENSORS,
     "fig_data_fit.png",
     "fig_span_profiles.png",
 )
@@ -191,7 +194,9 @@ def test_a_failing_figure_does_not_lose_the_report(defl, tmp_path, monkeypatch, 
         if r.levelno == logging.WARNING
     )
     assert not (tmp_path / "fig_span_profiles.png").exists()
-    assert_self_contained(tmp_path, ("fig_posteriors.png", "fig_residuals.png", "fig_data_fit.png"))
+    assert_self_contained(
+        tmp_path, ("fig_posteriors.png", "fig_residuals.png", *DEFL_SENSORS, "fig_data_fit.png")
+    )
     assert "simulated drawing failure" in (tmp_path / "report.md").read_text(encoding="utf-8")
 
 
@@ -215,7 +220,10 @@ def test_measured_strain_data_with_a_held_out_gauge(tmp_path):
         opts=RunOptions(profile="smoke"),
     )
     assert res.truth is None
-    figs = RUN_FIGURES + ("fig_gauges.png",)
+    figs = [f for f in RUN_FIGURES if f not in DEFL_SENSORS] + [
+        "fig_gauges.png",
+        "fig_sensor_S2.png",
+    ]
     html = assert_self_contained(out, figs)
     md = (out / "report.md").read_text(encoding="utf-8")
     for text in (md, html):
@@ -310,3 +318,95 @@ def test_sweep_report(defl, tmp_path):
     # without results (no truth, no Table 5) it still writes both reports
     write_sweep_reports(doc, [], tmp_path / "bare")
     assert_self_contained(tmp_path / "bare", ("fig_sweep_ei.png",))
+
+
+# ------------------------------------------------------------------------------------- the answer first
+#: the headline must sit within the first lines of report.md (what a reader sees without scrolling)
+HEADLINE_LINES = 15
+
+
+def test_the_answer_comes_first_in_both_reports(defl):
+    """EI's 90 % interval, the fit verdict and the agreement verdict in words within the first 15 lines of
+    report.md, and as the first text of report.html above any table; provenance at the end."""
+    cfg, res, out = defl
+    md = (out / "report.md").read_text(encoding="utf-8")
+    head = "\n".join(md.splitlines()[:HEADLINE_LINES])
+    e = res.summary["methods"]["modal_mcmc"]["EI"]
+    lo, hi = (f"{v / 1e9:.3f}" for v in e["ci90"])
+    assert f"90 % interval {lo} to {hi} GN·m²" in head
+    assert "**Fit:** The model fits the data" in head
+    assert "**Agreement:** Only the modal reference ran" in head
+    assert md.index("**Fit:**") < md.index("|")  # above every table
+    assert md.index("## Flexural rigidity EI") < md.index("## Data") < md.index("## Manifest")
+    html = (out / "report.html").read_text(encoding="utf-8")
+    body = html.split("<body>", 1)[1]
+    assert body.index('class="headline') < body.index("<table")
+    assert f"90 % interval {lo} to {hi} GN·m²" in body.split("<table")[0]
+
+
+def test_the_headline_says_when_a_pinn_disagrees(defl):
+    from bayespinn.report.headline import answer
+
+    cfg, res, _ = defl
+    a = answer(_pinn_like(cfg, res), advise=lambda r, k: pytest.fail("no misfit: no advice"))
+    agree = dict(a.items)["Agreement"]
+    assert "**Deep ensemble disagrees** with the modal reference" in agree and not a.ok
+    lines = a.lines()
+    assert lines[0].startswith("EI = ") and not any("**" in x for x in lines)
+
+
+def _misfit_run(toml: str, case: str, n_points: int = 100):
+    """A modal-only smoke analysis of a misspecified example at 30 dB."""
+    import bayespinn as bp
+
+    cfg = bp.resolve(case, toml)
+    cfg = dataclasses.replace(cfg, data=dataclasses.replace(cfg.data, n_points=n_points))
+    data = bp.simulate(cfg, snr_db=30.0, seed=0)
+    return cfg, bp.analyse(data, cfg, methods=("modal",), seed=0, profile="smoke")
+
+
+def test_a_misfit_says_so_first_with_the_advice_its_residuals_point_to(tmp_path):
+    """Bearings that resist rotation analysed as pins: the report's first sentence says the model does not
+    fit and advises inferring the support springs, chosen by the residuals (the same code advises EI per
+    segment for the damaged girder: `test_the_advice_follows_the_residuals`)."""
+    cfg, res = _misfit_run("examples/bearings-as-pinned.toml", "deflection")
+    assert res.summary["methods"]["modal_mcmc"]["fit_check"]["verdict"] == "misfit"
+    write_reports(res, cfg, tmp_path)
+    md = (tmp_path / "report.md").read_text(encoding="utf-8")
+    first = next(line for line in md.splitlines()[1:] if line.strip())
+    first_sentence = first.split(". ")[0]
+    assert first_sentence.startswith("**The model does not fit these data**")
+    assert 'infer the support springs (`[model] supports = "springs"`)' in first_sentence
+    html = (tmp_path / "report.html").read_text(encoding="utf-8")
+    assert 'class="headline warning"' in html
+    assert "infer the support springs" in html.split("<table")[0]
+
+
+@pytest.mark.slow
+def test_the_advice_follows_the_residuals():
+    """The negative control of the advice: a softer segment analysed as uniform EI (strain gauges) gets
+    'EI per segment', not the springs the bearings got."""
+    from bayespinn.report.advice import diagnose
+
+    cfg, res = _misfit_run("examples/damaged-as-uniform.toml", "strain")
+    adv = diagnose(res, cfg, "modal_mcmc")
+    assert "EI_segments" in adv.text and "supports" not in adv.text
+
+
+def test_noise_advice_reads_the_fit_checks_statistics():
+    """Serial correlation alone points to the noise model; with smooth structure too it does not (that is
+    a model's shape, diagnosed from the residuals); an AR(1) model already there gets no such advice."""
+    from bayespinn.report.advice import noise_advice
+
+    cfg = preset("strain")
+    serial = {
+        "p_values": {"serial_correlation": 0.0005, "smooth_structure": 0.4},
+        "residual_autocorr": 0.8,
+    }
+    both = {"p_values": {"serial_correlation": 0.0005, "smooth_structure": 0.0005}}
+    adv = noise_advice(serial, cfg)
+    assert adv is not None and '`[model] noise = "ar1"`' in adv.text and "+0.80" in adv.cause
+    assert noise_advice(both, cfg) is None
+    ar1 = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, noise="ar1"))
+    assert noise_advice(serial, ar1) is None
+    assert noise_advice({}, cfg) is None  # a fit check without per-statistic p-values

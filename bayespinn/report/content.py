@@ -56,21 +56,8 @@ def not_identified(methods: dict) -> list[tuple[str, str]]:
 
 
 def alerts(summary: dict) -> list[Block]:
-    """The statements that go on top: misfit first, then identifiability, unconverged samplers, disagreement."""
-    out: list[Block] = []
-    for key, m in summary["methods"].items():
-        fc = m.get("fit_check") or {}
-        if fc.get("verdict") == "misfit":
-            out.append(
-                Alert(
-                    f"**The data contradict the model** ({name(key)}, fit check p = {fc['p_value']:.2g}): "
-                    "these intervals assume a model the data contradict. The residuals keep structure that "
-                    "a uniform pinned beam under the stated loads with white noise cannot leave "
-                    f"(lag-1 autocorrelation {fc['residual_autocorr']:+.2f}); read EI as conditional on "
-                    "that model, not as a measurement of the girder. The residual figure "
-                    "(`fig_residuals.png`, under Figures) shows what the model leaves unexplained."
-                )
-            )
+    """The statements under the headline: identifiability, unconverged samplers, warnings, disagreement."""
+    out: list[Block] = []  # a misfit heads the report in the headline (`headline.answer`)
     for key, why in not_identified(summary["methods"]):
         out.append(
             Alert(
@@ -611,19 +598,23 @@ def run_document(
     table5_notes: list[str] = (),
 ) -> list[Block]:
     """Every block of a run report, in order."""
+    from .headline import cached_answer
+
     s = result.summary
     blocks: list[Block] = [Heading(title(s), 1)]
+    if s["methods"]:
+        blocks.append(cached_answer(result).block())  # the answer first, above every table
     blocks += alerts(s)
     if result.truth is None:
         blocks.append(Alert("Measured data: the truth and the SNR are unknown.", "info"))
-    blocks += data_section(result, cfg)
     blocks += ei_table(s)
     blocks += girder_section(result)
     blocks += sigma_table(s)
     blocks += comparison_section(s)
-    blocks += diagnostics_section(s)
-    blocks += runtime_section(result)
     blocks += figures_section(list(figures), list(figure_notes))
+    blocks += diagnostics_section(s)
     blocks += table5_section(list(table5s), list(table5_notes))
+    blocks += runtime_section(result)
+    blocks += data_section(result, cfg)  # provenance at the end
     blocks += manifest_section(result.manifest, result.truth is not None)
     return blocks

@@ -55,7 +55,18 @@ class BulletList:
     items: tuple[str, ...] = field(default_factory=tuple)
 
 
-Block = Heading | Paragraph | Alert | Table | Figure | Code | BulletList
+@dataclass(frozen=True)
+class Headline:
+    """The answer in a few sentences, first in every report: `lead` (EI with its interval, or the misfit
+    with its advice), then labelled statements (`items`: (label, text) pairs such as ("Fit", ...)).
+    `kind`: 'ok' when nothing is wrong, 'warning' when something is."""
+
+    lead: str
+    items: tuple[tuple[str, str], ...] = ()
+    kind: str = "ok"
+
+
+Block = Heading | Paragraph | Alert | Table | Figure | Code | BulletList | Headline
 
 
 def table(header, rows, caption: str = "") -> Table:

@@ -1,6 +1,8 @@
 """The run report's figures (PNG, matplotlib Agg, no pyplot state), written into the run folder.
 
 - `fig_posteriors.png`: EI and sigma posteriors per method, 90 % intervals, truth when known;
+- `fig_sensor_<name>.png`: per sensor, the series against each method's predictive band, residuals
+  underneath, one row per crossing (`sensors`);
 - `fig_data_fit.png`: the data against the posterior predictive (noise included);
 - `fig_residuals.png`: standardised residuals at the posterior mean against t and x, per method, with
   the fit check's verdict (what a misfit alert points to);
@@ -441,7 +443,7 @@ def make_figures(result, cfg: Config, folder: str | Path) -> tuple[list[FigureFi
             caption = func(result, cfg, folder / fname, pv.report_rng(seed, fname))
             written.append(FigureFile(fname, title, caption))
         except SkipFigure as why:
-            log.info("figure %s not drawn: %s", fname, why)
+            log.debug("figure %s not drawn: %s", fname, why)
             quiet = isinstance(why, NotApplicable) or (
                 fname == "fig_gauges.png" and "deflection data" in str(why)
             )
@@ -456,4 +458,27 @@ def make_figures(result, cfg: Config, folder: str | Path) -> tuple[list[FigureFi
             )
             notes.append(f"{title}: left out, drawing it failed ({type(exc).__name__}: {exc}).")
             (folder / fname).unlink(missing_ok=True)
+    at = next((i + 1 for i, f in enumerate(written) if f.name == "fig_residuals.png"), len(written))
+    written[at:at] = _sensor_figures(result, cfg, folder, notes)
     return written, notes
+
+
+def _sensor_figures(result, cfg: Config, folder: Path, notes: list[str]) -> list[FigureFile]:
+    """The per-sensor figures (`sensors.sensor_figures`); a failure costs a note, never the report."""
+    from .sensors import sensor_figures
+
+    try:
+        return sensor_figures(result, cfg, folder)
+    except SkipFigure as why:
+        log.debug("sensor figures not drawn: %s", why)
+        return []
+    except Exception as exc:  # a figure must never lose the report
+        log.warning(
+            "warning: the per-sensor figures failed and are left out of the report: %s: %s",
+            type(exc).__name__,
+            exc,
+        )
+        notes.append(f"Per-sensor figures: left out, drawing them failed ({type(exc).__name__}).")
+        for f in folder.glob("fig_sensor_*.png"):
+            f.unlink(missing_ok=True)
+        return []

@@ -10,7 +10,7 @@ import logging
 import re
 from pathlib import Path
 
-from .document import Alert, Block, BulletList, Code, Figure, Heading, Paragraph, Table
+from .document import Alert, Block, BulletList, Code, Figure, Heading, Headline, Paragraph, Table
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +33,12 @@ pre { background: #f5f5f7; border: 1px solid #ddd; padding: .6rem; overflow-x: a
 figure { margin: 1rem 0 1.6rem; }
 figure img { max-width: 100%; height: auto; border: 1px solid #e2e2e8; }
 figcaption { font-size: .88rem; color: #444; margin-top: .3rem; }
+.headline { border: 1px solid #b9c7dc; border-left: 8px solid #2e7d32; background: #f3f8f3;
+            padding: .9rem 1.2rem; margin: 1rem 0 1.4rem; border-radius: 4px; }
+.headline.warning { border-left-color: #c0392b; background: #fdf1ef; border-color: #e3b9b2; }
+.headline .lead { font-size: 1.3rem; margin: 0 0 .6rem; line-height: 1.35; }
+.headline .row { display: flex; gap: .8rem; margin: .3rem 0; font-size: 1rem; }
+.headline .label { flex: 0 0 8.5rem; font-weight: 600; color: #334; }
 .missing { color: #8a5a00; font-style: italic; }
 """
 
@@ -81,6 +87,16 @@ def render_html(blocks: list[Block], folder: str | Path, title: str) -> str:
             body.append(f"<h{lv}>{inline(b.text)}</h{lv}>")
         elif isinstance(b, Paragraph):
             body.append(f"<p>{inline(b.text)}</p>")
+        elif isinstance(b, Headline):
+            items = "".join(
+                f'<div class="row"><span class="label">{inline(label)}</span>'
+                f"<span>{inline(text)}</span></div>"
+                for label, text in b.items
+            )
+            body.append(
+                f'<section class="headline {html.escape(b.kind)}" aria-label="the answer">'
+                f'<p class="lead">{inline(b.lead)}</p>{items}</section>'
+            )
         elif isinstance(b, Alert):
             cls = "alert info" if b.kind == "info" else "alert"
             body.append(f'<div class="{cls}" role="note">{inline(b.text)}</div>')

@@ -7,7 +7,7 @@ in the same folder, so report.md and report.html show the same figures.
 from __future__ import annotations
 
 from ..config import Config
-from .document import Alert, Block, BulletList, Code, Figure, Heading, Paragraph, Table
+from .document import Alert, Block, BulletList, Code, Figure, Heading, Headline, Paragraph, Table
 from .units import fmt_EI, sigma_unit  # noqa: F401  (re-exported for older imports)
 
 
@@ -23,6 +23,9 @@ def render_markdown(blocks: list[Block]) -> str:
             lines += ["#" * min(max(b.level, 1), 6) + " " + b.text, ""]
         elif isinstance(b, Paragraph):
             lines += [b.text, ""]
+        elif isinstance(b, Headline):
+            lines += [b.lead, ""]
+            lines += [f"- **{label}:** {text}" for label, text in b.items] + [""]
         elif isinstance(b, Alert):
             lead = "**Note.**" if b.kind == "info" else "**Warning.**"
             lines += [f"> {lead} {b.text}", ""]
