@@ -96,6 +96,7 @@ class CrossingModel:
         self.x, self.t = x, t
         self.a_u = np.broadcast_to(np.asarray(a_u, float), (P,)).copy()
         self.a_xx = np.broadcast_to(np.asarray(a_xx, float), (P,)).copy()
+        self.any_u, self.any_xx = bool(np.any(self.a_u != 0)), bool(np.any(self.a_xx != 0))
         self.n_modes, self.n_basis = int(n_modes), int(n_basis)
         self.basis_modes = min(self.n_modes, int(n_modes if basis_modes is None else basis_modes))
         self.k = np.arange(1, self.n_modes + 1) * math.pi / self.L  # (N,)
@@ -226,9 +227,11 @@ class CrossingModel:
             tp = self.t[None, :] - t0[:, None] - oj / v[:, None]  # (W, P)
             on = (tp >= 0.0) & (tp <= Te[:, None])
             pos = np.clip(v[:, None] * tp, 0.0, self.L)
-            st = self.a_u * static_unit_deflection(self.x[None, :], pos, self.L) - self.a_xx * (
-                static_unit_moment(self.x[None, :], pos, self.L)
-            )
+            st = np.zeros_like(pos)
+            if self.any_u:
+                st += self.a_u * static_unit_deflection(self.x[None, :], pos, self.L)
+            if self.any_xx:
+                st -= self.a_xx * static_unit_moment(self.x[None, :], pos, self.L)
             st = np.where(on, st, 0.0) * (Pj / EI[:, None])
             mean += st
             if R is None:
