@@ -73,6 +73,7 @@ from .lastlayer import (
     LastLayerPredictor,
     log_prior_z,
 )
+from .lastlayer_grid import log_marginal_grid
 from .pinn_ar1 import AR1Posterior
 from .posterior import Posterior
 from .priors import EIPrior, NoisePrior, prior_only
@@ -137,18 +138,14 @@ def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
     """The noise level's posterior for one member at its fitted EI (see the module docstring); with the
     SNR-conditioned noise prior its log-normal density is added (as in the B-PINN). With AR(1) noise the
     joint posterior of sigma and the coefficient (`ar1_grid`)."""
-    import torch
 
     if ll.ar1 is not None:
         return ar1_grid(ll, noise)
 
     center = 0.5 * math.log(max(ll.fit_rss, 1e-300) / max(ll.n, 1))
     grid = center + np.linspace(-SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_POINTS)
-    lt = torch.tensor(math.log(ll.theta_fit), dtype=torch.float64)
-    with torch.no_grad(), torch_threads(1):
-        lp = np.array(
-            [float(ll.log_marginal(lt, torch.tensor(g, dtype=torch.float64))) for g in grid]
-        )
+    with torch_threads(1):
+        lp = log_marginal_grid(ll, math.log(ll.theta_fit), grid)
     if noise.kind == "snr":
         lp = lp - 0.5 * ((grid - math.log(noise.center)) / noise.log_sd) ** 2
     if int(np.argmax(lp)) in (0, grid.size - 1):
@@ -256,21 +253,14 @@ def member_marginal(
     starts at the member's trained EI, `sd` (its local width) sets its step, and it follows the peak:
     the trained EI can sit several local widths from the marginal's mean (module docstring). None when
     there is no width (`sd` nan) or the density never falls off within the grid."""
-    import torch
 
     if not (math.isfinite(sd) and sd > 0):
         return None
     centre, half = math.log(ll.theta_fit), MARGINAL_HALF_WIDTH * sd
-    ls = torch.tensor(math.log(grid.mode), dtype=torch.float64)
+    ls = math.log(grid.mode)
     for _ in range(MARGINAL_TRIES):
         g = centre + np.linspace(-half, half, MARGINAL_POINTS)
-        with torch.no_grad():
-            lp = np.array(
-                [
-                    float(ll.log_marginal(torch.tensor(v, dtype=torch.float64), ls, grid.z_mode))
-                    for v in g
-                ]
-            )
+        lp = log_marginal_grid(ll, g, ls, grid.z_mode)
         lp = lp - 0.5 * ((g + log_shift - ei_prior.loc) / ei_prior.log_sd) ** 2
         p = np.exp(lp - lp.max())
         if max(p[0], p[-1]) < GRID_EDGE:
@@ -331,6 +321,10 @@ class _Phase:
     state: dict | None  # the batched state (batched path)
     runtime_s: float  # training time, summed over members when they ran as separate tasks
     fit0: object = None  # phase 1, task path: member 0's FitResult (the B-PINN's warm start)
+    lap_sd: np.ndarray | None = None  # phase 2, task path: each member's local width (in its task)
+    marginals: list | None = (
+        None  # phase 2, task path: each member's marginal of log EI (in its task)
+    )
 
 
 @dataclass(frozen=True)
@@ -432,8 +426,13 @@ def train_member(task: MemberTask) -> dict:
             out["state"] = r.state
             if t.m == 0:
                 out["fit"] = r
-        else:
+        else:  # the member's own posterior of EI, here in its task rather than one by one after
+            ei_prior = EIPrior.from_spec(t.cfg.prior)
+            sd = local_sd(ll, out["grid"], ei_prior)
+            shift = math.log(base.EI_ref) - math.log(out["beta_factor"])
             out["last_layer"] = ll
+            out["local_sd"] = sd
+            out["marginal"] = member_marginal(ll, out["grid"], ei_prior, shift, float(sd))
     return out
 
 
@@ -451,6 +450,8 @@ def _phase_tasks(tasks: list[MemberTask], executor, desc: str, progress: bool) -
         state=None,
         runtime_s=float(sum(r["runtime_s"] for r in res)),
         fit0=res[0].get("fit"),
+        lap_sd=np.array([r["local_sd"] for r in res]) if "local_sd" in res[0] else None,
+        marginals=[r["marginal"] for r in res] if "marginal" in res[0] else None,
     )
 
 
@@ -672,13 +673,17 @@ def pooled_posterior(
     # the member's marginal of log EI (its posterior given its features), centred where the data put it
     lls, grids = p2.last_layers, p2.grids
     shifts = [math.log(base.EI_ref) - math.log(f) for f in p2.beta_factor]
+    if lap_sd is None:
+        lap_sd = p2.lap_sd
     with torch_threads(1):
         if lap_sd is None:
             lap_sd = np.array([local_sd(ll, g, ei_prior) for ll, g in zip(lls, grids, strict=True)])
-        marginals = [
-            member_marginal(ll, g, ei_prior, sh, float(sd))
-            for ll, g, sh, sd in zip(lls, grids, shifts, lap_sd, strict=True)
-        ]
+        marginals = p2.marginals
+        if marginals is None:
+            marginals = [
+                member_marginal(ll, g, ei_prior, sh, float(sd))
+                for ll, g, sh, sd in zip(lls, grids, shifts, lap_sd, strict=True)
+            ]
     mu, between, lap_var, n_marg, pooled = pool_log_ei(log_ei_m, marginals, ei_prior.log_sd)
     warn = []
     bad = [i for i, m in enumerate(marginals) if m is None]

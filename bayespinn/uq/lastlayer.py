@@ -527,15 +527,11 @@ class LastLayer:
         lap = self.laplace_sd_log_theta(log_theta, log_sigma, prior_sd, z)
         half = GRID_HALF_WIDTH * lap if math.isfinite(lap) else prior_sd
         ls = torch.tensor(log_sigma, dtype=torch.float64)
+        from .lastlayer_grid import log_marginal_grid  # the grid as one batch
+
         for _ in range(GRID_DOUBLINGS + 1):
             g = log_theta + np.linspace(-half, half, points)
-            with torch.no_grad():
-                lp = np.array(
-                    [
-                        float(self.log_marginal(torch.tensor(v, dtype=torch.float64), ls, z))
-                        for v in g
-                    ]
-                )
+            lp = log_marginal_grid(self, g, float(ls), z)
             lp = lp - 0.5 * ((g - log_theta) / prior_sd) ** 2
             p = np.exp(lp - lp.max())
             if max(p[0], p[-1]) < GRID_EDGE:
