@@ -63,8 +63,6 @@ def _opts(args, snr_db) -> RunOptions:
 
 
 def cmd_run(args) -> int:
-    from .pipeline import run
-
     if args.data is None and args.snr is None:
         raise InputError(
             "--snr", None, "'clean' or a finite number of dB > 0 (or give --data FILE.csv)"
@@ -79,14 +77,42 @@ def cmd_run(args) -> int:
                 "--noise-prior", "snr", "a nominal --snr in dB to centre the noise prior on"
             )
     out = writable_out(args.out or default_out(args), folder=True)
+    from .pipeline import run
+
     res = run(
         cfg, methods=methods, snr_db=snr, seed=args.seed, data_path=args.data, out=out, opts=opts
     )
     log.info("wrote %s", out)
+    sys.stdout.write(closing_lines(res, out))
+    return 0
+
+
+def closing_lines(res, out) -> str:
+    """The end of `bayespinn run` on the terminal: the methods' table and the headline of the report
+    (`report.headline`), on stdout, whatever --quiet says (it silences progress, not the answer)."""
+    from .report.headline import cached_answer, strip_marks
+    from .report.units import name
+
+    rows = [("method", "EI (GN·m²)", "90 % interval", "fit check", "vs reference")]
+    from .uq.agreement import REFERENCE_KEY, agreement
+
+    verdicts = {v.method: v for v in agreement(res.summary["methods"])}
     for k, m in res.summary["methods"].items():
         e = m["EI"]
-        log.info("%-10s EI %.5g N m^2, 90%% [%.5g, %.5g]", k, e["mean"], e["ci90"][0], e["ci90"][1])
-    return 0
+        v = verdicts.get(k)
+        rows.append(
+            (
+                name(k),
+                f"{e['mean'] / 1e9:.4f}",
+                f"[{e['ci90'][0] / 1e9:.4f}, {e['ci90'][1] / 1e9:.4f}]",
+                str((m.get("fit_check") or {}).get("verdict", "n/a")),
+                "reference" if k == REFERENCE_KEY else strip_marks(v.label) if v else "n/a",
+            )
+        )
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    table = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip() for r in rows]
+    head = cached_answer(res).lines()
+    return "\n".join(["", *table, "", *head, f"Report: {Path(out) / 'report.html'}", ""])
 
 
 def cmd_coverage(args) -> int:

@@ -497,6 +497,9 @@ class Config:
                 raise InputError(
                     f"data.sensors {s.name}.x", s.x, f"a position in [0, {self.beam.length}] m"
                 )
+        from .limits import check_limits
+
+        check_limits(self)  # ranges the model and the machine carry (bayespinn.limits)
 
     @property
     def infers_load_factor(self) -> bool:

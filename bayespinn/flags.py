@@ -67,6 +67,11 @@ def add_method_flags(p: argparse.ArgumentParser) -> None:
         "--profile paper, else last-layer)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress output")
+    p.add_argument(
+        "--verbose",
+        action="store_true",
+        help="also every training step and the library's detailed messages",
+    )
 
 
 def check_method_flags(args) -> None:

@@ -88,8 +88,9 @@ def config_from_args(args) -> Config:
         raise InputError("--noise-prior", args.noise_prior, "vague or snr")
     if getattr(args, "executor", "local") not in EXECUTORS:
         raise InputError("--executor", args.executor, "local or ray")
+    cfg = resolve(args.case, args.config)  # first: a bad input is told before torch is imported
     resolve_device(getattr(args, "device", "auto"))
-    return resolve(args.case, args.config)
+    return cfg
 
 
 def default_out(args, kind: str = "runs") -> Path:
