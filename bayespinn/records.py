@@ -221,8 +221,8 @@ def provenance_of(path: str | Path, keypath: str, root: str | Path = ".") -> dic
     prov = None
     if p.name in ("summary.json", "manifest.json") and (p.parent / "manifest.json").is_file():
         prov = load(p.parent / "manifest.json")
-    elif doc.get("schema") == "bayespinn.coverage/1":
-        prov = _coverage_run(p, root)
+    elif doc.get("schema") == "bayespinn.coverage/1" and not _is_provenance(doc.get("provenance")):
+        prov = _coverage_run(p, root)  # older study files: the coverage table's run that wrote them
     if prov is None:
         prov = _nearest_provenance(doc, keypath)
     if prov is None:

@@ -447,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
             )
             c.write_json(study, res)
             partial.unlink(missing_ok=True)
-            row = {k: v for k, v in res.items() if k != "records"}
+            row = {k: v for k, v in res.items() if k not in ("records", "config", "provenance")}
             row["acceptance_99"] = list(
                 binomial_acceptance(res["replicates"], args.level, FALSE_FAILURE)
             )

@@ -314,6 +314,10 @@ def test_coverage_resume_keeps_other_commits_and_counts_them(tmp_path):
     today = short_commit(code_commit()["commit"], code_commit()["dirty"])
     assert doc["commits"] == {today: 2}
     assert all("git_commit" in r and "code_version" not in r for r in doc["records"])
+    prov = doc["provenance"]  # the file's own: command, commit, dirty flag, date, packages, machine
+    assert {"command", "git_commit", "git_dirty", "date", "versions", "machine"} <= set(prov)
+    assert prov["machine"]["cpu_model"] and prov["versions"]["numpy"]
+    assert doc["config"]["beam"]["EI"] == preset().beam.EI and doc["seed"] == 3
     doc["records"][0]["git_commit"] = "0123456789abcdef"  # as if computed at an older commit
     doc["records"][0]["git_dirty"] = False
     first.write_text(json.dumps(doc), encoding="utf-8")

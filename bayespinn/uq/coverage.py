@@ -17,6 +17,7 @@ import hashlib
 import json
 import logging
 import os
+import sys
 import time
 import zlib
 from dataclasses import dataclass
@@ -31,7 +32,7 @@ from ..data.synthetic import simulate
 from ..errors import InputError
 from ..executor import Executor, task_resources
 from ..options import RunOptions
-from ..provenance import commits, record_commit
+from ..provenance import commits, provenance, record_commit
 
 log = logging.getLogger(__name__)
 
@@ -336,6 +337,8 @@ def coverage_study(
     hits = int(sum(r["hit"] for r in recs))
     ranks = np.array([r["rank"] for r in recs])
     p = float(stats.kstest(ranks, "uniform").pvalue) if replicates > 1 else float("nan")
+    from .posterior import jsonable
+
     return {
         "schema": "bayespinn.coverage/1",
         "method": methods.get(method).key,
@@ -360,6 +363,10 @@ def coverage_study(
         "power_vs_80": power(replicates, level),
         "verdict": verdict(hits, replicates, level),
         "fingerprint": key,
+        "config": jsonable(cfg.to_dict()),
+        # who wrote this file: the command, commit, machine and date of the run that finished it (each
+        # replicate's own commit is in its record)
+        "provenance": {"command": list(sys.argv), **provenance(str(opts.device or "cpu"))},
         "records": recs,
     }
 
