@@ -410,3 +410,13 @@ def test_noise_advice_reads_the_fit_checks_statistics():
     ar1 = dataclasses.replace(cfg, model=dataclasses.replace(cfg.model, noise="ar1"))
     assert noise_advice(serial, ar1) is None
     assert noise_advice({}, cfg) is None  # a fit check without per-statistic p-values
+
+
+def test_one_sensor_out_of_line_points_to_that_sensor():
+    from bayespinn.report.advice import sensor_advice
+
+    fc = {"reasons": ["one_sensor:S3"], "worst_sensor": {"name": "S3", "variance_ratio": 4.2}}
+    adv = sensor_advice(fc)
+    assert adv is not None and "sensor S3" in adv.text and "4.2 times" in adv.cause
+    assert sensor_advice({"reasons": ["one_sensor:S3", "smooth_structure"]}) is None
+    assert sensor_advice({"reasons": ["serial_correlation"]}) is None and sensor_advice({}) is None

@@ -11,7 +11,8 @@ hides in EI's own direction, as a stiff bearing's does, and shows its shape only
 much of the residuals' energy they explain beyond EI's own direction. Under the model the explained
 energy over sigma^2 is chi^2 with as many degrees of freedom as directions (a score test of the
 extension); the extension with the smallest p-value is the advice. Serial correlation without smooth
-structure points to the noise model instead (the fit check's own statistics decide that).
+structure points to the noise model instead, and one sensor out of line with the others to that sensor
+(the fit check's own statistics and reasons decide those two).
 
 Nothing here is per example: the candidates, their directions and the test are the same for every run.
 Finite-element solves cost about half a second each, so the diagnosis runs only for a misfit.
@@ -60,6 +61,23 @@ GENERIC = Advice(
 def _p_values(fc: dict) -> dict:
     p = fc.get("p_values")
     return p if isinstance(p, dict) else {}
+
+
+def sensor_advice(fc: dict) -> Advice | None:
+    """One sensor out of line with the others (the fit check's `one_sensor:<name>` reason) and no smooth
+    structure: a loose gauge, a wrong position or a wrong fibre distance, not the girder."""
+    reasons = fc.get("reasons") if isinstance(fc.get("reasons"), list) else []
+    named = [str(r).split(":", 1)[1] for r in reasons if str(r).startswith("one_sensor:")]
+    if not named or "smooth_structure" in reasons:
+        return None
+    ws = fc.get("worst_sensor") if isinstance(fc.get("worst_sensor"), dict) else {}
+    ratio = ws.get("variance_ratio") if ws.get("name") == named[0] else None
+    times = f" ({float(ratio):.1f} times the others' residual variance)" if ratio else ""
+    return Advice(
+        f"check sensor {named[0]} (its position, fibre distance and fixing) or leave its rows out of "
+        "the file",
+        f"one sensor, {named[0]}, out of line with the others{times}",
+    )
 
 
 def noise_advice(fc: dict, cfg) -> Advice | None:
@@ -188,9 +206,9 @@ def diagnose(result, cfg, key: str) -> Advice:
     from ..uq.fitcheck import mean_prediction
 
     fc = result.summary["methods"][key].get("fit_check") or {}
-    noise = noise_advice(fc, cfg)
-    if noise is not None:
-        return noise
+    first = sensor_advice(fc) or noise_advice(fc, cfg)
+    if first is not None:
+        return first
     post, data = result.posteriors.get(key), result.data
     if post is None or cfg is None or data is None or len(data) == 0:
         return GENERIC

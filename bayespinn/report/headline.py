@@ -123,7 +123,8 @@ def fit_sentence(methods: dict, key: str, extra: str = "") -> str:
     if verdict == "misfit":
         return (
             f"**the data contradict the model** (fit check p = {fc.get('p_value', float('nan')):.2g}"
-            f"{extra}); the residual figure shows what the model leaves unexplained."
+            f"{extra}); the residual figure (`fig_residuals.png`, under Figures) shows what the model "
+            "leaves unexplained."
         )
     return "no fit check could run (no predictor or too few data): the model's fit is unknown."
 
