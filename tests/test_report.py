@@ -420,3 +420,39 @@ def test_one_sensor_out_of_line_points_to_that_sensor():
     assert adv is not None and "sensor S3" in adv.text and "4.2 times" in adv.cause
     assert sensor_advice({"reasons": ["one_sensor:S3", "smooth_structure"]}) is None
     assert sensor_advice({"reasons": ["serial_correlation"]}) is None and sensor_advice({}) is None
+
+
+def _png_height(path: Path) -> int:
+    import struct
+
+    return struct.unpack(">II", path.read_bytes()[16:24])[1]
+
+
+def test_per_sensor_figures_give_one_row_per_crossing(defl, tmp_path):
+    """Deflection points grouped by stretch of the span, one figure each; a `crossing` column gives each
+    crossing a row of its own (the figure grows by one row), and without it the file is one crossing."""
+    from bayespinn.report.sensors import crossings_of, sensor_figure, sensor_groups
+
+    cfg, res, _ = defl
+    groups = sensor_groups(res.data, cfg.beam.length)
+    assert [g[0] for g in groups] == ["x1", "x2", "x3", "x4"]
+    assert sum(int(g[2].sum()) for g in groups) == len(res.data)  # every point in one group
+    assert crossings_of(res.data)[0][0] is None
+    d = res.data
+    two = dataclasses.replace(
+        d,
+        **{
+            f: np.concatenate([getattr(d, f), getattr(d, f)])
+            for f in ("x", "t", "value", "kind", "y", "sensor")
+        },
+        value_true=None,
+        crossing=np.array(["c0"] * len(d) + ["c1"] * len(d)),
+    )
+    both = RunResult(two, res.truth, res.posteriors, res.summary, res.manifest, res.config)
+    assert [n for n, _ in crossings_of(two)] == ["c0", "c1"]
+    rng = np.random.default_rng(0)
+    one = sensor_figure(res, groups[1][2], "one", tmp_path / "one.png", rng)
+    rows = sensor_groups(two, cfg.beam.length)[1][2]
+    sensor_figure(both, rows, "two", tmp_path / "two.png", rng)
+    assert "90 %" in one
+    assert _png_height(tmp_path / "two.png") > 1.7 * _png_height(tmp_path / "one.png")
