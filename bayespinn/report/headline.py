@@ -198,7 +198,7 @@ def answer(result, advise=None) -> Answer:
             )
         )
         if adv.share is not None:
-            explained = f"; {adv.text.split(' (')[0]} would explain {100 * adv.share:.0f} % of the residuals"
+            explained = f"; the advised extension explains {100 * adv.share:.0f} % of the residuals"
         else:
             explained = ""
         fit_extra = explained
