@@ -381,7 +381,21 @@ def test_a_misfit_report_heads_with_the_alert_and_draws_the_residuals(tmp_path):
         out = bp.write_run(res, tmp_path / str(misfit))
         md = (out / "report.md").read_text(encoding="utf-8")
         assert (out / "fig_residuals.png").stat().st_size > 0
-        assert ("The data contradict the model" in md) is misfit
+        assert ("The model does not fit these data" in md) is misfit
         if misfit:
             head = md.split("\n## ", 1)[0]
-            assert "The data contradict the model" in head and "fig_residuals.png" in head
+            assert "The model does not fit these data" in head and "fig_residuals.png" in head
+
+
+def test_a_predictor_with_fewer_draws_than_asked_is_used_as_it_is():
+    """An ensemble returns a whole number of draws per member, fewer than asked; a point predictor one
+    row: the prediction draws take what the predictor has instead of failing on the shape."""
+    data = bp.simulate(bp.resolve("strain"), 30, 0)
+    post = _oracle(data)
+    inner = post.predictor
+    post.predictor = lambda x, t, q, n, rng: inner(x, t, q, n, rng)[: n - 2]
+    d = fitcheck.prediction_draws(post, data, draws=32)
+    assert d.shape == (30, len(data))
+    np.testing.assert_allclose(d[0], data.value_true, rtol=1e-12, atol=0)
+    post.predictor = lambda x, t, q, n, rng: inner(x, t, q, 1, rng)
+    assert fitcheck.prediction_draws(post, data, draws=32).shape == (1, len(data))

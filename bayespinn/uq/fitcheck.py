@@ -73,12 +73,19 @@ def prediction_draws(
         return None
     rng = np.random.default_rng(np.random.SeedSequence(int(seed), spawn_key=(7,)))
     strain = np.asarray(data.kind) == "strain"
-    out = np.empty((draws, len(data)))
+    parts = []
     for quantity, rows in (("deflection", ~strain), ("curvature", strain)):
         if rows.any():
-            r = np.asarray(post.predictor(data.x[rows], data.t[rows], quantity, draws, rng), float)
-            r = np.broadcast_to(r, (draws, int(rows.sum()))) if r.shape[0] == 1 else r
-            out[:, rows] = -data.y[rows] * r if quantity == "curvature" else r
+            r = np.atleast_2d(
+                np.asarray(post.predictor(data.x[rows], data.t[rows], quantity, draws, rng), float)
+            )
+            parts.append((rows, -data.y[rows] * r if quantity == "curvature" else r))
+    # a predictor may return fewer draws than asked (an ensemble: a whole number per member) or one
+    # row (a point prediction): use what every quantity has
+    n = min((r.shape[0] for _, r in parts if r.shape[0] > 1), default=1)
+    out = np.empty((n, len(data)))
+    for rows, r in parts:
+        out[:, rows] = r[:n] if r.shape[0] > 1 else np.broadcast_to(r, (n, int(rows.sum())))
     return out
 
 
