@@ -18,19 +18,18 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .lastlayer import LastLayer, _cholesky
-
 #: grid points per batch (bounds the memory of the stacked precisions: 256 x 70 x 70 float64 is 10 MB)
 BATCH = 256
 
 
-def log_marginal_grid(ll: LastLayer, log_theta, log_sigma, z=None) -> np.ndarray:
+def log_marginal_grid(ll, log_theta, log_sigma, z=None) -> np.ndarray:
     """log p(y, pseudo-observations | theta, sigma[, z]) at each pair of `log_theta` and `log_sigma`
     (arrays, broadcast against each other to (G,)); float64 numpy (G,), no gradient."""
     lt, ls = np.broadcast_arrays(np.asarray(log_theta, float), np.asarray(log_sigma, float))
     lt, ls = lt.ravel(), ls.ravel()
     T = lambda a: torch.as_tensor(a, dtype=torch.float64)  # noqa: E731
-    batched = isinstance(ll, LastLayer) and ll.ar1 is None and (ll.fv is None or ll.pde_v is None)
+    # a `LastLayer`, duck-typed (it imports this module, not the other way round)
+    batched = hasattr(ll, "G_dd") and ll.ar1 is None and (ll.fv is None or ll.pde_v is None)
     if not batched:  # point by point (also any object with a `log_marginal` of its own)
         with torch.no_grad():
             return np.array(
@@ -39,12 +38,17 @@ def log_marginal_grid(ll: LastLayer, log_theta, log_sigma, z=None) -> np.ndarray
     out = []
     with torch.no_grad():
         for i in range(0, lt.size, BATCH):
-            out.append(_batch(ll, T(lt[i : i + BATCH]), T(ls[i : i + BATCH])))
+            a, b = T(lt[i : i + BATCH]), T(ls[i : i + BATCH])
+            lp, bad = _batch(ll, a, b)
+            for g in bad:  # rounding lost definiteness: `log_marginal`'s jittered factorisation
+                lp[g] = float(ll.log_marginal(a[g], b[g]))
+            out.append(lp)
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def _batch(ll: LastLayer, lt: torch.Tensor, ls: torch.Tensor) -> np.ndarray:
-    """`LastLayer._system` and `log_marginal` for G points at once (white noise)."""
+def _batch(ll, lt: torch.Tensor, ls: torch.Tensor) -> tuple[np.ndarray, list[int]]:
+    """`LastLayer._system` and `log_marginal` for G points at once (white noise), and the points whose
+    precision lost definiteness to rounding (the caller recomputes those one by one)."""
     it = torch.exp(-lt)[:, None, None]  # (G, 1, 1)
     inv_s2 = torch.exp(-2 * ls)[:, None, None]
     d2 = inv_s2 * it**2  # the data rows are D / theta
@@ -60,18 +64,17 @@ def _batch(ll: LastLayer, lt: torch.Tensor, ls: torch.Tensor) -> np.ndarray:
         b = torch.cat([b, b_v], 1)
     A = A + ll.eye
     L, info = torch.linalg.cholesky_ex(A)
-    for g in (
-        torch.nonzero(info).flatten().tolist()
-    ):  # rounding lost definiteness: the jitter, one by one
-        L[g] = _cholesky(A[g])
+    bad = torch.nonzero(info).flatten().tolist()
+    if bad:  # placeholders: the caller replaces these points' values
+        L[bad] = torch.eye(A.shape[-1], dtype=A.dtype)
     w = torch.cholesky_solve(b.unsqueeze(-1), L).squeeze(-1)
     logdet = 2 * torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1)
     inv = inv_s2[:, 0, 0]
     lp = -0.5 * (ll.yy * inv + ll.ff) + 0.5 * (b * w).sum(-1) - 0.5 * logdet - ll.n * ls
-    return lp.numpy()
+    return lp.numpy(), bad
 
 
-def _varying(ll: LastLayer, lt: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def _varying(ll, lt: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """`LastLayer._varying` at G values of log theta: the free vibrations' data design (G, n, nv) and
     initial-condition rows (G, 2 n_ic, nv)."""
     xd, td = ll.xi_d.unsqueeze(0), ll.tau_d.unsqueeze(0)
