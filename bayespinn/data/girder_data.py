@@ -27,7 +27,7 @@ from ..errors import InputError
 from ..physics.fem import FESettings
 from ..physics.girder import Girder, GirderFE
 from .measurements import Measurements
-from .synthetic import (  # noqa: F401 (re-exported: the load factor's draw lives with simulate)
+from .noise import (  # noqa: F401 (re-exported)
     LOAD_REL_SD_MAX,
     check_load_rel_sd,
     draw_load_factor,

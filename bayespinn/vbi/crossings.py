@@ -20,7 +20,7 @@ import numpy as np
 from .. import seeding
 from ..config import Axle, Config, Vehicle, replace
 from ..data.measurements import Measurements
-from ..data.synthetic import _stream, ar1_noise, draw_load_factor, sigma_for_snr
+from ..data.noise import _stream, ar1_noise, draw_load_factor, sigma_for_snr
 from ..errors import InputError
 from .beam import SimBeam
 from .road import flat_road, iso8608_road
