@@ -33,12 +33,15 @@ def _common(p: argparse.ArgumentParser, *, snr: bool = True, method: bool = True
     p.add_argument(
         "--case", default="deflection", help="deflection (case study 1) or strain (case study 2)"
     )
-    if method:
-        p.add_argument(
-            "--method", default="all", help="modal, ensemble, bpinn, all, or a comma list"
-        )
-    add_method_flags(p)
     p.add_argument("--config", help="TOML file overriding the Exeter preset")
+    if not method:  # simulate: data only, none of the flags that choose how the methods run
+        p.add_argument(
+            "--seed", type=int_at_least("--seed", 0), default=0, help="root seed (default 0)"
+        )
+        p.add_argument("--quiet", action="store_true", help="no progress output")
+        return
+    p.add_argument("--method", default="all", help="modal, ensemble, bpinn, all, or a comma list")
+    add_method_flags(p)
     p.add_argument("--executor", default="local", help="local (process pool) or ray")
     p.add_argument(
         "--address", default=None, help="Ray cluster address (with --executor ray), or 'auto'"

@@ -191,8 +191,22 @@ def test_cuda_without_gpu_is_bad_input(tmp_path):
 
     if torch.cuda.is_available():
         pytest.skip("a GPU is present")
-    r = _cli("simulate", "--snr", "10", "--device", "cuda", "--out", str(tmp_path / "a.csv"))
-    assert r.returncode == 2 and "cuda" in r.stderr.lower()
+    out = tmp_path / "run"
+    r = _cli("run", "--snr", "10", "--method", "modal", "--device", "cuda", "--out", str(out))
+    assert r.returncode == 2 and "--device" in r.stderr and "cuda" in r.stderr.lower()
+    assert not out.exists()
+
+
+def test_simulate_offers_only_the_flags_it_uses():
+    """simulate makes data: its help lists no flag that chooses how a method runs, and such a flag is
+    refused as unknown (exit 2), while run still offers them."""
+    sim = _cli("simulate", "--help").stdout
+    for flag in ("--members", "--bpinn-variant", "--profile", "--device", "--workers", "--method"):
+        assert flag not in sim
+    assert "--seed" in sim and "--config" in sim
+    assert "--members" in _cli("run", "--help").stdout
+    r = _cli("simulate", "--snr", "10", "--members", "3")
+    assert r.returncode == 2 and "--members" in r.stderr
 
 
 def test_cli_coverage_resumes_from_its_file(tmp_path):
