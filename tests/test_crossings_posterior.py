@@ -112,6 +112,7 @@ def _fluctuating_truth(cfg, amp: float, freq: float, seed: int):
     return lambda x, t, a_u, a_xx: resp.sample(x, t, a_u, a_xx)
 
 
+@pytest.mark.study  # about 17 minutes on 2 shared cores: run with -m study, outside CI's slow tier
 def test_fluctuating_forces_hold_the_truth_where_constant_forces_miss():
     toml = {
         "data": {"sample_rate": 100.0},
