@@ -11,6 +11,7 @@ import numpy as np
 from .. import seeding
 from ..config import Config
 from ..physics.fem import FESettings, fe_response
+from .layout import layout_over
 from .measurements import Measurements
 from .noise import (  # noqa: F401 (re-exported: the names `simulate`'s users have always imported here)
     LOAD_REL_SD_MAX,
@@ -29,24 +30,7 @@ def sample_layout(cfg: Config, seed: int | np.random.SeedSequence) -> Measuremen
     deflection: `cfg.data.n_points` points uniform over [0, L] x [0, T] (the paper's random 100);
     strain: each gauge of `cfg.sensors` sampled at `cfg.data.sample_rate` over [0, T].
     """
-    L, T = cfg.beam.length, cfg.duration
-    if cfg.case == "deflection":
-        r = seeding.rng(seed, "points")
-        n = cfg.data.n_points
-        x, t = r.uniform(0.0, L, n), r.uniform(0.0, T, n)
-        kind = np.full(n, "deflection")
-        y = np.full(n, np.nan)
-        sensor = np.full(n, "")
-    else:
-        times = np.arange(0.0, T + 1e-12, 1.0 / cfg.data.sample_rate)
-        S = cfg.sensors
-        x = np.concatenate([np.full(times.size, s.x) for s in S])
-        t = np.tile(times, len(S))
-        y = np.concatenate([np.full(times.size, s.y) for s in S])
-        kind = np.full(x.size, "strain")
-        sensor = np.concatenate([np.full(times.size, s.name) for s in S])
-    z = np.zeros(x.size)
-    return Measurements(x, t, z, kind.astype(str), y, sensor.astype(str), z.copy())
+    return layout_over(cfg, cfg.duration, seeding.rng(seed, "points"))
 
 
 #: largest relative sd of the axle loads that `draw_load_factor` accepts

@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import seeding
 from ..config import Axle, Config, Vehicle, replace
+from ..data.layout import layout_over
 from ..data.measurements import Measurements
 from ..data.noise import _stream, ar1_noise, draw_load_factor, sigma_for_snr
 from ..errors import InputError
@@ -59,22 +60,7 @@ def window(cfg: Config, vehicle: Vehicle) -> float:
 def layout(cfg: Config, vehicle: Vehicle, seed) -> Measurements:
     """Where and when the sensors read over [0, entry_time + T] (values zero); the same points as
     `data.synthetic.sample_layout` when entry_time = 0."""
-    L, T = cfg.beam.length, window(cfg, vehicle)
-    if cfg.case == "deflection":
-        r = np.random.default_rng(seed)
-        n = cfg.data.n_points
-        x, t = r.uniform(0.0, L, n), r.uniform(0.0, T, n)
-        kind, y, sensor = np.full(n, "deflection"), np.full(n, np.nan), np.full(n, "")
-    else:
-        times = np.arange(0.0, T + 1e-12, 1.0 / cfg.data.sample_rate)
-        S = cfg.sensors
-        x = np.concatenate([np.full(times.size, s.x) for s in S])
-        t = np.tile(times, len(S))
-        y = np.concatenate([np.full(times.size, s.y) for s in S])
-        kind = np.full(x.size, "strain")
-        sensor = np.concatenate([np.full(times.size, s.name) for s in S])
-    z = np.zeros(x.size)
-    return Measurements(x, t, z, kind.astype(str), y, sensor.astype(str), z.copy())
+    return layout_over(cfg, window(cfg, vehicle), np.random.default_rng(seed))
 
 
 def simulate_crossing(
