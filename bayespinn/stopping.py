@@ -11,6 +11,7 @@ pool would report and then carry on with the next one.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 import threading
 from contextlib import contextmanager
@@ -25,7 +26,22 @@ def stop_workers() -> int:
         p.kill()
     for p in children:
         p.join(timeout=2)
+    _stop_fork_server()
     return len(children)
+
+
+def _stop_fork_server() -> None:
+    """Kill the fork server the local pool starts its workers from (it runs no task and would otherwise
+    linger until it notices this process has gone)."""
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    pid = getattr(server, "_forkserver_pid", None)
+    if pid:  # not reaped here: the next pool's `ensure_running` reaps it and starts a new one
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
 
 
 def _stop(signum, frame):  # noqa: ARG001 - signal handler signature

@@ -157,7 +157,9 @@ def _terminal(args: list[str]) -> list[str]:
         env={**__import__("os").environ, "OMP_NUM_THREADS": "1"},
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    return (r.stderr + r.stdout).splitlines()
+    # a terminal row per newline; what a carriage return redraws stays on its row (splitlines would
+    # count every redraw of a bar as a line)
+    return [row.rsplit("\r", 1)[-1] for row in (r.stderr + r.stdout).rstrip("\n").split("\n")]
 
 
 def _check_terminal(lines: list[str]) -> None:
