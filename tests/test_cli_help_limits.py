@@ -159,7 +159,17 @@ def _terminal(args: list[str]) -> list[str]:
     assert r.returncode == 0, r.stderr[-2000:]
     # a terminal row per newline; what a carriage return redraws stays on its row (splitlines would
     # count every redraw of a bar as a line)
-    return [row.rsplit("\r", 1)[-1] for row in (r.stderr + r.stdout).rstrip("\n").split("\n")]
+    rows = [row.rsplit("\r", 1)[-1] for row in (r.stderr + r.stdout).rstrip("\n").split("\n")]
+    # captured output is no terminal, so tqdm writes each refresh of a bar on a row of its own; a terminal
+    # redraws the bar in place: consecutive refreshes of one bar (same label, a '%|' gauge) are one row
+    out: list[str] = []
+    for row in rows:
+        bar = "%|" in row and row.split(":", 1)[0]
+        if bar and out and "%|" in out[-1] and out[-1].split(":", 1)[0] == bar:
+            out[-1] = row
+        else:
+            out.append(row)
+    return out
 
 
 def _check_terminal(lines: list[str]) -> None:
