@@ -16,6 +16,7 @@ import numpy as np
 
 from ..config import Config
 from ..data.measurements import Measurements
+from ..physics.loads import quantity_weights
 from ..uq import fitcheck
 from ..uq.posterior import Posterior
 from .forward import CrossingModel, basis_frequencies
@@ -85,12 +86,7 @@ class CrossingsPredictor:
     def __call__(self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None):
         rng = rng or np.random.default_rng(0)
         x, t = np.broadcast_arrays(np.asarray(x, float).ravel(), np.asarray(t, float).ravel())
-        if quantity == "deflection":
-            w = (1.0, 0.0)
-        elif quantity in ("curvature", "moment"):
-            w = (0.0, 1.0)
-        else:
-            raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
+        w = quantity_weights(quantity)
         idx = rng.choice(self.n, size=min(n_draws, self.n), replace=False)
         which = self._crossing_of(x, t, "curvature" if w[1] else "deflection")
         out = np.empty((idx.size, x.size))

@@ -41,3 +41,13 @@ def distributed_load(
     live = (a >= 0.0) & (a <= beam.length)
     p = vehicle.loads.reshape((-1,) + (1,) * np.ndim(t))
     return np.sum(p * live * gaussian_delta(x[None, ...] - a, beta), axis=0)
+
+
+def quantity_weights(quantity: str) -> tuple[float, float]:
+    """The (deflection, curvature) weights a predictor's modal model reads for `quantity`: what every
+    predictor's `quantity` argument means (the fit check and the report call them alike)."""
+    if quantity == "deflection":
+        return (1.0, 0.0)
+    if quantity in ("curvature", "moment"):
+        return (0.0, 1.0)
+    raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")

@@ -19,6 +19,7 @@ from ..data.measurements import Measurements
 from ..errors import InputError
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
+from ..physics.loads import quantity_weights
 from .girder_posterior import GirderPosterior, girder_posterior
 from .posterior import Posterior
 from .priors import EIPrior
@@ -78,12 +79,7 @@ class GirderPredictor:
         ei = p.EI_segments.reshape(-1, S)
         pick = rng.choice(ei.shape[0], size=min(n_draws, ei.shape[0]), replace=False)
         x, t = np.broadcast_arrays(np.asarray(x, float).ravel(), np.asarray(t, float).ravel())
-        if quantity == "deflection":
-            w = (1.0, 0.0)
-        elif quantity in ("curvature", "moment"):
-            w = (0.0, 1.0)
-        else:
-            raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
+        w = quantity_weights(quantity)
         springs = p.rotational_stiffness is not None
         m = GirderModalModel(
             self.template,

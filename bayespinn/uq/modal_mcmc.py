@@ -22,6 +22,7 @@ from scipy.optimize import minimize_scalar
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
+from ..physics.loads import quantity_weights
 from ..physics.modal import ModalModel
 from .posterior import Posterior, mcmc_diagnostics
 from .priors import EIPrior, NoisePrior, prior_only
@@ -305,12 +306,7 @@ class ModalPredictor:
         rng = rng or np.random.default_rng(0)
         ei = rng.choice(self.EI, size=min(n_draws, self.EI.size), replace=False)
         x, t = np.broadcast_arrays(np.asarray(x, float).ravel(), np.asarray(t, float).ravel())
-        if quantity == "deflection":
-            w = (1.0, 0.0)
-        elif quantity in ("curvature", "moment"):
-            w = (0.0, 1.0)
-        else:
-            raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
+        w = quantity_weights(quantity)
         m = ModalModel(self.cfg.beam, self.cfg.vehicle, x, t, *w, n_modes=max(self.n_modes, 24))
         out = m.predict(ei)
         return -ei[:, None] * out if quantity == "moment" else out
