@@ -507,6 +507,14 @@ class Config:
         return self.model.load_factor == "auto" and self.vehicle.load_rel_sd > 0
 
     @property
+    def real_girder(self) -> bool:
+        """Whether the analysis model is a real girder: EI per segment, springs at the supports or an
+        inferred load factor (whatever the noise model). The PINN methods then fit the girder network
+        (`uq.girder_pinn`) rather than the uniform, pinned one."""
+        m = self.model
+        return m.EI_segments > 1 or m.supports != "pinned" or self.infers_load_factor
+
+    @property
     def ideal(self) -> bool:
         """The analysis model is a uniform, pinned girder under known loads with white noise."""
         return self.model.ideal and not self.infers_load_factor

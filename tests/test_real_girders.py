@@ -51,6 +51,10 @@ def test_toml_keys_of_the_contract():
     assert b.EI == pytest.approx(5 / sum(1 / e for e in DAMAGED))
     assert b.rotational_stiffness == (0.0, math.inf) and not b.ideal
     assert cfg.vehicle.load_rel_sd == 0.05 and cfg.infers_load_factor and not cfg.ideal
+    assert cfg.real_girder and not resolve("deflection").real_girder
+    # AR(1) noise alone leaves the uniform, pinned, known-load girder (not ideal, not a real girder)
+    ar1 = resolve("deflection", {"model": {"noise": "ar1"}})
+    assert not ar1.ideal and not ar1.real_girder
     assert cfg.model.EI_segments == 5 and cfg.model.supports == "springs"
     assert cfg.prior.k_median == 2e8 and cfg.data.noise_ar1 == 0.5
     # a scalar EI and a one-element list are the uniform girder

@@ -83,11 +83,9 @@ class LastLayerBPINN(BPINN):
     integrated out exactly."""
 
     def check(self, data, config) -> None:
-        from ..uq.girder_pinn import check_girder, is_girder_model
+        from ..uq.girder_pinn import check_girder
 
-        if is_girder_model(
-            config
-        ):  # EI per segment, springs or an uncertain load (`uq.girder_pinn`)
+        if config.real_girder:  # EI per segment, springs or an uncertain load (`uq.girder_pinn`)
             return check_girder(config, data, self.display)
         # AR(1) noise is in its likelihood (`uq.pinn_ar1`); the girder model is checked as for white noise
         from ..uq.pinn_ar1 import as_white
@@ -95,9 +93,9 @@ class LastLayerBPINN(BPINN):
         super().check(data, as_white(config))
 
     def infer(self, data, config, *, seed):
-        from ..uq.girder_pinn import girder_bpinn_posterior, is_girder_model, member_fit_seed
+        from ..uq.girder_pinn import girder_bpinn_posterior, member_fit_seed
 
-        if not is_girder_model(config):
+        if not config.real_girder:
             return super().infer(data, config, seed=seed)
         from ..uq.shared_fit import ensemble_seed
 

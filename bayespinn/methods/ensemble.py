@@ -33,11 +33,9 @@ class DeepEnsemble(Method):
     modules = ("bayespinn.methods.ensemble", "bayespinn.uq.ensemble_batch")
 
     def check(self, data, config) -> None:
-        from ..uq.girder_pinn import check_girder, is_girder_model
+        from ..uq.girder_pinn import check_girder
 
-        if is_girder_model(
-            config
-        ):  # EI per segment, springs or an uncertain load (`uq.girder_pinn`)
+        if config.real_girder:  # EI per segment, springs or an uncertain load (`uq.girder_pinn`)
             return check_girder(config, data, self.display)
         # AR(1) noise is in its likelihood (`uq.pinn_ar1`); the girder model is checked as for white noise
         from ..uq.pinn_ar1 import as_white
@@ -53,10 +51,8 @@ class DeepEnsemble(Method):
     def infer_many(self, datas, config, *, seeds):
         """The posterior of each dataset (same girder model, one seed each): on a GPU their ensembles train
         as one network (`uq.ensemble_batch.ensemble_posteriors`), elsewhere `infer` runs on each in turn."""
-        from ..uq.girder_pinn import is_girder_model
-
         # AR(1) noise and real girders: one ensemble at a time
-        if not self.batches() or config.model.noise != "iid" or is_girder_model(config):
+        if not self.batches() or config.model.noise != "iid" or config.real_girder:
             return [self.infer(d, config, seed=sd) for d, sd in zip(datas, seeds, strict=True)]
         from ..uq.ensemble_batch import ensemble_posteriors
         from ..uq.priors import NoisePrior
@@ -77,12 +73,12 @@ class DeepEnsemble(Method):
 
     def infer(self, data, config, *, seed):
         from ..uq.ensemble import ensemble_posterior
-        from ..uq.girder_pinn import girder_ensemble_posterior, is_girder_model
+        from ..uq.girder_pinn import girder_ensemble_posterior
         from ..uq.priors import NoisePrior
         from ..uq.shared_fit import ensemble_seed
 
         s = self.settings
-        if is_girder_model(config):
+        if config.real_girder:
             return girder_ensemble_posterior(
                 data,
                 config,

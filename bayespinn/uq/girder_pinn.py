@@ -109,12 +109,6 @@ def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
     return seeding.child(ensemble_seed, "init", m)
 
 
-def is_girder_model(cfg: Config) -> bool:
-    """Whether the analysis model is a real girder (EI per segment, springs, or an inferred load factor)."""
-    m = cfg.model
-    return m.EI_segments > 1 or m.supports != "pinned" or cfg.infers_load_factor
-
-
 def check_girder(cfg: Config, data: Measurements, display: str) -> None:
     """Refuse what the girder PINN does not describe (exit 2, naming the field)."""
     if cfg.model.noise != "iid":
@@ -575,5 +569,4 @@ __all__ = [
     "check_girder",
     "girder_bpinn_posterior",
     "girder_ensemble_posterior",
-    "is_girder_model",
 ]
