@@ -164,8 +164,8 @@ def analyse(
 
     Returns
     -------
-    RunResult with `posteriors` by summary key (e.g. "modal_mcmc"), `summary` (what summary.json holds)
-    and `manifest`.
+    RunResult with `posteriors` by summary key (the reference's: `methods.REFERENCE_KEY`), `summary` (what
+    summary.json holds) and `manifest`.
     """
     t_start = time.perf_counter()
     if opts is None:
@@ -391,7 +391,7 @@ def agreement_entries(methods: dict) -> dict:
     from .uq.agreement import agreement
 
     out = {}
-    ref = methods.get("modal_mcmc")
+    ref = methods.get(registry.REFERENCE_KEY)
     for v in agreement(methods):
         if v.agrees is None:
             continue

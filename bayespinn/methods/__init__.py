@@ -24,8 +24,10 @@ from __future__ import annotations
 from ..errors import InputError
 from ..options import RunOptions
 from .base import Method, Settings, check_choice, check_device
+from .reference import REFERENCE_KEY
 
 __all__ = [
+    "REFERENCE_KEY",
     "Method",
     "Settings",
     "build",

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from .. import seeding
 from .base import Method, Settings
+from .reference import REFERENCE_KEY
 
 
 @dataclass(frozen=True)
@@ -20,7 +21,7 @@ class ModalMCMC(Method):
     for the model every method shares."""
 
     name = "modal"
-    key = "modal_mcmc"
+    key = REFERENCE_KEY
     display = "Modal reference (emcee)"
     colour = "#1f5fa8"
     reference = True

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import methods
 from ..config import Config, resolve, snr_label
-from ..uq.agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement
+from ..uq.agreement import MEAN_TOL_SD, REFERENCE_KEY, SD_RATIO_RANGE, agreement
 from ..uq.table5 import table5
 from .canvas import DPI, TRUTH_STYLE
 from .document import Alert, Block, BulletList, Figure, Heading, Paragraph, table
@@ -74,7 +74,7 @@ def table4_block(doc: dict, truth_EI: float | None = None):
                     fmt_EI_interval(e["ci95"], d),
                     err,
                     f"{covers(e['ci90'], truth_EI)} / {covers(e['ci95'], truth_EI)}",
-                    verdicts.get(key, "reference" if key == "modal_mcmc" else "n/a"),
+                    verdicts.get(key, "reference" if key == REFERENCE_KEY else "n/a"),
                 )
             )
     return table(

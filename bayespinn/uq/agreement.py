@@ -87,8 +87,8 @@ def compare(
     return Verdict(method, d, ratio, not reasons, tuple(reasons))
 
 
-#: the summary key of the reference posterior
-REFERENCE_KEY = "modal_mcmc"
+#: the summary key of the reference posterior (the methods registry's)
+REFERENCE_KEY = registry.REFERENCE_KEY
 
 
 def agreement(methods: dict, reference: str = REFERENCE_KEY, **limits) -> list[Verdict]:

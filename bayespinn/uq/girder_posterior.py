@@ -64,6 +64,7 @@ from ..config import Beam, Vehicle, _check_number
 from ..data.girder_data import check_load_rel_sd
 from ..data.measurements import Measurements
 from ..errors import InputError
+from ..methods.reference import REFERENCE_KEY
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
 from ..threads import one_blas_thread
@@ -581,7 +582,7 @@ class GirderPosterior:
     diagnostics: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     runtime_s: float = 0.0
-    method: str = "modal_mcmc"
+    method: str = REFERENCE_KEY
     #: (chain, draw) AR(1) coefficient of the noise between consecutive samples, or None (white noise)
     noise_ar1: np.ndarray | None = None
 

@@ -17,6 +17,7 @@ import numpy as np
 from ..config import Config
 from ..data.measurements import Measurements
 from ..errors import InputError
+from ..methods.reference import REFERENCE_KEY
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
 from ..physics.loads import quantity_weights
@@ -123,7 +124,7 @@ def girder_reference(
     )
     info = {"EI_nominal": gp.EI_nominal, **gp.info}
     return GirderReference(
-        "modal_mcmc",
+        REFERENCE_KEY,
         gp.EI,
         gp.sigma,
         diagnostics=gp.diagnostics,

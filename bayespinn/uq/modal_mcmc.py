@@ -22,6 +22,7 @@ from scipy.optimize import minimize_scalar
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
+from ..methods.reference import REFERENCE_KEY
 from ..physics.loads import quantity_weights
 from ..physics.modal import ModalModel
 from .posterior import Posterior, mcmc_diagnostics
@@ -283,7 +284,7 @@ def modal_posterior(
     if not info["identified"]:
         info["note"] = "EI is not identified by these data"
     return Posterior(
-        "modal_mcmc",
+        REFERENCE_KEY,
         EI,
         sig,
         diagnostics=diag,

@@ -61,7 +61,8 @@ class Posterior:
 
     Attributes
     ----------
-    method : the method's summary key ("modal_mcmc", "ensemble", "bpinn", or a registered method's)
+    method : the method's summary key (the reference's `methods.REFERENCE_KEY`, "ensemble", "bpinn", or a
+        registered method's)
     EI, sigma : arrays (chain, draw)
     diagnostics : e.g. rhat, ess_bulk, ess_tail, converged, n_modes, truncation error
     info : method-specific summary entries (members, member_EI, variant, ...), copied into summary.json

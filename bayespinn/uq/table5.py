@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import Config
+from ..methods import REFERENCE_KEY
 from . import predictive as pv
 
 QUANTITIES = ("deflection", "moment")
@@ -47,7 +48,7 @@ def _metrics(draws: np.ndarray, truth: np.ndarray, level: float) -> dict:
 def table5(
     result,
     cfg: Config,
-    method: str = "modal_mcmc",
+    method: str = REFERENCE_KEY,
     *,
     times=pv.PAPER_TIMES,
     n_points: int = N_POINTS,
