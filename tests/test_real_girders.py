@@ -251,7 +251,7 @@ def test_the_peak_search_scans_the_load_ridge(monkeypatch):
     sys.path.insert(0, str(REPO / "studies"))
     import girders
 
-    import bayespinn.uq.girder_posterior as gp
+    import bayespinn.uq.girder_map as gm
     from bayespinn.pipeline import analyse, true_values_of
 
     cfg = resolve("deflection", str(REPO / "examples" / "uncertain-load.toml"))
@@ -265,5 +265,5 @@ def test_the_peak_search_scans_the_load_ridge(monkeypatch):
         return (e["mean"] - truth["EI"]) / e["sd"]
 
     assert abs(z()) < 3.0
-    monkeypatch.setattr(gp, "RIDGE_STARTS", 0)
+    monkeypatch.setattr(gm, "RIDGE_STARTS", 0)
     assert abs(z()) > 10.0

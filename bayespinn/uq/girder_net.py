@@ -22,7 +22,8 @@ from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
 from ..pinn.network import PINN
 from ..pinn.problem import Problem
-from .girder_posterior import GirderLogPosterior, ParameterLayout, choose_girder_modes, find_map
+from .girder_logpost import GirderLogPosterior, ParameterLayout
+from .girder_map import choose_girder_modes, find_map
 from .priors import EIPrior
 
 log = logging.getLogger(__name__)

@@ -48,7 +48,6 @@ median). `GirderPosterior.summary()` uses the keys of the contract's "Real girde
 
 from __future__ import annotations
 
-import logging
 import math
 import time
 import warnings
@@ -57,7 +56,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.optimize import minimize
 
 from .. import seeding
 from ..config import Beam, Vehicle, _check_number
@@ -65,490 +63,46 @@ from ..data.girder_data import check_load_rel_sd
 from ..data.measurements import Measurements
 from ..errors import InputError
 from ..methods.reference import REFERENCE_KEY
-from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
 from ..threads import one_blas_thread
-from .ar1 import Z_MAX, AR1Noise, lag1
-from .modal_mcmc import TRUNCATION_FRACTION
+from .ar1 import AR1Noise
+from .girder_emcee import GirderChains, GirderMCMCSettings, run_emcee
+from .girder_logpost import BATCH, SUPPORT_SD, GirderLogPosterior, ParameterLayout
+from .girder_map import (
+    MODE_STEPS,
+    choose_girder_modes,
+    find_map,
+    laplace_covariance,
+    surrogate_model,
+)
 from .posterior import jsonable, mcmc_diagnostics, summarise
 from .priors import EIPrior, NoisePrior
 from .sampler import ESS_MIN, RHAT_MAX
+
+#: its public names, with those of its parts in their own modules (`girder_logpost`: the log posterior;
+#: `girder_map`: MAP, Laplace covariance, mode count; `girder_emcee`: the sampler), importable from here
+__all__ = [
+    "BATCH",
+    "DAMAGE_FRACTION",
+    "MODE_STEPS",
+    "SUPPORT_SD",
+    "GirderChains",
+    "GirderLogPosterior",
+    "GirderMCMCSettings",
+    "GirderPosterior",
+    "ParameterLayout",
+    "choose_girder_modes",
+    "find_map",
+    "girder_posterior",
+    "laplace_covariance",
+    "run_emcee",
+]
 
 SUPPORTS = ("pinned", "springs")
 LOAD_FACTOR_MODES = ("auto", "off")
 NOISE_MODELS = ("iid", "ar1")
 #: a segment is damaged when its EI is below this fraction of EI_nominal
 DAMAGE_FRACTION = 0.9
-#: every parameter is confined to this many prior sd around its prior centre
-SUPPORT_SD = 10.0
-#: mode counts tried in turn by the truncation check
-MODE_STEPS = (6, 12, 24, 48)
-#: largest batch of parameter sets per surrogate call
-BATCH = 512
-
-
-@dataclass(frozen=True)
-class GirderMCMCSettings:
-    """emcee run for the girder posterior: walkers from the dimension, run length from tau."""
-
-    n_groups: int = 2
-    min_walkers: int = 32
-    walkers_per_dim: int = 4
-    chunk: int = 200
-    min_steps: int = 600
-    max_steps: int = 40000
-    tau_factor: float = 50.0
-    burn_factor: float = 5.0
-    tau_rtol: float = 0.1
-    #: initial cloud: MAP + start_scale x Laplace-covariance draws
-    start_scale: float = 1.0
-    #: emcee moves: "de" (emcee's DEMove, differential evolution) or "stretch" (emcee's default)
-    moves: str = "de"
-
-    def __post_init__(self) -> None:
-        for name in (
-            "n_groups",
-            "min_walkers",
-            "walkers_per_dim",
-            "chunk",
-            "min_steps",
-            "max_steps",
-        ):
-            v = getattr(self, name)
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, int)
-                or v < (2 if name == "n_groups" else 1)
-            ):
-                raise InputError(f"mcmc.{name}", v, "an integer >= 1 (n_groups >= 2)")
-        for name in ("tau_factor", "burn_factor", "tau_rtol", "start_scale"):
-            _check_number(f"mcmc.{name}", getattr(self, name), positive=True)
-        if self.moves not in ("stretch", "de"):
-            raise InputError("mcmc.moves", self.moves, "'stretch' or 'de'")
-
-    def walkers_per_group(self, dim: int) -> int:
-        """max(min_walkers, walkers_per_dim x dim) over the groups, even, and >= 2 dim per group
-        (emcee's red-blue moves need twice the dimension)."""
-        total = max(self.min_walkers, self.walkers_per_dim * dim)
-        per = max(-(-total // self.n_groups), 2 * dim)
-        return per + per % 2
-
-
-@dataclass(frozen=True)
-class ParameterLayout:
-    """Where each parameter sits in theta."""
-
-    n_segments: int
-    infer_springs: bool
-    infer_load: bool
-    infer_ar1: bool = False
-
-    @property
-    def dim(self) -> int:
-        return self.n_segments + 2 * self.infer_springs + self.infer_load + self.infer_ar1
-
-    @property
-    def springs(self) -> slice:
-        return slice(self.n_segments, self.n_segments + 2 * self.infer_springs)
-
-    @property
-    def load(self) -> int | None:
-        return self.n_segments + 2 * self.infer_springs if self.infer_load else None
-
-    @property
-    def ar1(self) -> int | None:
-        """Where z = atanh(rho) of AR(1) noise sits (last), or None (white noise)."""
-        return self.dim - 1 if self.infer_ar1 else None
-
-    def names(self) -> list[str]:
-        out = [f"EI_segments[{s}]" for s in range(self.n_segments)]
-        if self.infer_springs:
-            out += ["rotational_stiffness[0]", "rotational_stiffness[1]"]
-        if self.infer_load:
-            out.append("load_factor")
-        if self.infer_ar1:
-            out.append("noise_ar1")
-        return out
-
-
-class GirderLogPosterior:
-    """log p(theta | y) up to a constant, sigma integrated out: log prior - (n/2) log RSS (white noise), or
-    log prior - (n/2) log Q - ((n - m)/2) log(1 - rho^2) with AR(1) noise (`uq.ar1`).
-
-    Call with theta shaped (W, dim); -inf outside the support (10 prior sd; |rho| <= ar1.RHO_MAX).
-    """
-
-    def __init__(
-        self,
-        model: GirderModalModel,
-        y: np.ndarray,
-        layout: ParameterLayout,
-        ei_prior: EIPrior,
-        k_prior: tuple[float, float] | None,
-        load_rel_sd: float | None,
-        noise: AR1Noise | None = None,
-    ):
-        if layout.infer_ar1 != (noise is not None):
-            raise ValueError("AR(1) noise needs its series, and only then")
-        self.model, self.layout, self.noise = model, layout, noise
-        self.y = np.asarray(y, float)
-        self.n = self.y.size
-        S = layout.n_segments
-        loc = [ei_prior.loc] * S
-        sd = [ei_prior.log_sd] * S
-        if layout.infer_springs:
-            if k_prior is None:
-                raise InputError("prior.k_median", None, "a spring prior when springs are inferred")
-            loc += [math.log(k_prior[0])] * 2
-            sd += [k_prior[1]] * 2
-        if layout.infer_load:
-            if not load_rel_sd:
-                raise InputError("vehicle.load_rel_sd", load_rel_sd, "> 0 to infer the load factor")
-            loc.append(0.0)  # log load factor; its sd to first order
-            sd.append(load_rel_sd)
-        if layout.infer_ar1:
-            loc.append(0.0)  # z = atanh(rho); its prior (uniform rho) has sd about 1 in z
-            sd.append(1.0)
-        self.load_rel_sd = load_rel_sd
-        self.loc, self.sd = np.array(loc), np.array(sd)
-        self.lo = self.loc - SUPPORT_SD * self.sd
-        self.hi = self.loc + SUPPORT_SD * self.sd
-        if layout.infer_load:
-            self.lo[layout.load] = math.log(max(1.0 - SUPPORT_SD * load_rel_sd, 1e-3))
-            self.hi[layout.load] = math.log(1.0 + SUPPORT_SD * load_rel_sd)
-        if layout.infer_ar1:
-            self.lo[layout.ar1], self.hi[layout.ar1] = -Z_MAX, Z_MAX
-
-    def unpack(self, theta: np.ndarray):
-        """(EI (W, S), springs (W, 2) or None, load factor (W,) or None) of theta (W, dim)."""
-        lay = self.layout
-        theta = np.atleast_2d(theta)
-        EI = np.exp(theta[:, : lay.n_segments])
-        ks = np.exp(theta[:, lay.springs]) if lay.infer_springs else None
-        lf = np.exp(theta[:, lay.load]) if lay.infer_load else None
-        return EI, ks, lf
-
-    def log_prior(self, theta: np.ndarray) -> np.ndarray:
-        """Log prior density with respect to theta, up to a constant."""
-        lay = self.layout
-        theta = np.atleast_2d(theta)
-        z = (theta - self.loc) / self.sd
-        g = lay.n_segments + 2 * lay.infer_springs  # the Gaussian coordinates
-        out = -0.5 * np.sum(z[:, :g] ** 2, axis=1)
-        if lay.infer_load:
-            ll = theta[:, lay.load]  # log load factor: N(1, sd) in the factor, times its Jacobian
-            out = out - 0.5 * ((np.exp(ll) - 1.0) / self.load_rel_sd) ** 2 + ll
-        if lay.infer_ar1:
-            out = out + AR1Noise.log_prior(theta[:, lay.ar1])
-        return out
-
-    def predict(self, theta: np.ndarray) -> np.ndarray:
-        """Surrogate predictions (W, P), in batches of BATCH."""
-        theta = np.atleast_2d(theta)
-        out = np.empty((theta.shape[0], self.n))
-        for i in range(0, theta.shape[0], BATCH):
-            EI, ks, lf = self.unpack(theta[i : i + BATCH])
-            out[i : i + BATCH] = self.model.predict(EI, ks, lf)
-        return out
-
-    def rss(self, theta: np.ndarray) -> np.ndarray:
-        r = self.y[None, :] - self.predict(theta)
-        return np.einsum("wp,wp->w", r, r)
-
-    def log_noise(self, theta: np.ndarray) -> np.ndarray:
-        """The sigma-marginalised log likelihood: -(n/2) log RSS, or with AR(1) noise
-        -(n/2) log Q(rho) - ((n - m)/2) log(1 - rho^2)."""
-        theta = np.atleast_2d(theta)
-        if self.noise is None:
-            return -0.5 * self.n * np.log(self.rss(theta))
-        z = theta[:, self.layout.ar1]
-        q = self.noise.quad(self.y[None, :] - self.predict(theta), z)
-        return -0.5 * self.n * np.log(q) + self.noise.log_jacobian(z)
-
-    def log_quad(self, theta: np.ndarray, lp: np.ndarray) -> np.ndarray:
-        """log of the sum of squares sigma's inverse-gamma law uses (RSS, or Q(rho) with AR(1) noise),
-        recovered from stored log densities lp = log prior + log_noise."""
-        theta = np.atleast_2d(theta)
-        rest = self.log_prior(theta) - lp
-        if self.noise is not None:
-            rest = rest + self.noise.log_jacobian(theta[:, self.layout.ar1])
-        return rest * (2.0 / self.n)
-
-    def inside(self, theta: np.ndarray) -> np.ndarray:
-        theta = np.atleast_2d(theta)
-        return np.all((theta > self.lo) & (theta < self.hi), axis=1) & np.all(
-            np.isfinite(theta), axis=1
-        )
-
-    def __call__(self, theta: np.ndarray) -> np.ndarray:
-        theta = np.atleast_2d(theta)
-        out = np.full(theta.shape[0], -np.inf)
-        ok = self.inside(theta)
-        if ok.any():
-            out[ok] = self.log_prior(theta[ok]) + self.log_noise(theta[ok])
-        return out
-
-
-# --------------------------------------------------------------------------------------------------
-# MAP, Laplace covariance, mode count
-
-
-def _neg_with_grad(post: GirderLogPosterior, h: float = 1e-6):
-    def fg(th: np.ndarray) -> tuple[float, np.ndarray]:
-        D = th.size
-        pts = np.vstack([th, th + h * np.eye(D), th - h * np.eye(D)])
-        v = -post(pts)
-        if not np.all(np.isfinite(v)):
-            return float(v[0]) if np.isfinite(v[0]) else 1e300, np.zeros(D)
-        return float(v[0]), (v[1 : D + 1] - v[D + 1 :]) / (2 * h)
-
-    return fg
-
-
-def find_map(post: GirderLogPosterior, starts: Sequence[np.ndarray] | None = None) -> np.ndarray:
-    """theta at the posterior maximum: a scan of a common log EI (other parameters at their prior
-    centres), then L-BFGS-B from there (and from each of `starts`; with springs inferred also from
-    springs 2 prior sd below and above their median); the best end point."""
-    lay = post.layout
-    S = lay.n_segments
-    base = post.loc.copy()
-    grid = post.loc[0] + post.sd[0] * np.linspace(-6.0, 6.0, 241)
-    pts = np.repeat(base[None], grid.size, axis=0)
-    pts[:, :S] = grid[:, None]
-    base[:S] = grid[int(np.argmax(post(pts)))]
-    if lay.infer_ar1:  # start rho at the residuals' lag-1 autocorrelation there
-        r = post.y - post.predict(base)[0]
-        base[lay.ar1] = math.atanh(min(max(lag1(post.noise.series, r), -0.95), 0.95))
-    cands = [base]
-    if lay.infer_springs:
-        for dz in (-2.0, 2.0):
-            c = base.copy()
-            c[lay.springs] += dz * post.sd[lay.springs]
-            cands.append(c)
-    if lay.infer_load:
-        cands += _ridge_starts(post, base)
-    cands += [np.asarray(s, float) for s in (starts or [])]
-    pad = 1e-3 * post.sd
-    bounds = list(zip(post.lo + pad, post.hi - pad, strict=True))
-    fg = _neg_with_grad(post)
-    best, best_f = None, np.inf
-    for c in cands:
-        c = np.clip(c, post.lo + pad, post.hi - pad)
-        res = minimize(
-            fg,
-            c,
-            jac=True,
-            method="L-BFGS-B",
-            bounds=bounds,
-            options={"maxiter": 500, "ftol": 1e-14, "gtol": 1e-8},
-        )
-        if res.fun < best_f:
-            best, best_f = np.asarray(res.x, float), float(res.fun)
-    return best
-
-
-#: the load factor's ridge is scanned over this many prior sds each side, at this many points, and the
-#: best local maxima along it start L-BFGS-B
-RIDGE_SD, RIDGE_POINTS, RIDGE_STARTS = 4.0, 161, 3
-
-
-def _ridge_starts(post: GirderLogPosterior, base: np.ndarray) -> list[np.ndarray]:
-    """Starts along the load factor's ridge. The quasi-static response fixes EI / load, so the posterior
-    has a ridge where both move together; along it the first mode's frequency (sqrt EI) changes, and the
-    vibration's phase over a crossing makes the likelihood oscillate: a local search from the load's prior
-    centre ends on whichever peak is nearest (measured: 15 of 100 replicates at 40 dB, each some 15-40
-    posterior sds off). The ridge is scanned (log EI of every segment and log load shifted together) and
-    its best local maxima are returned."""
-    lay = post.layout
-    S, li = lay.n_segments, lay.load
-    shift = np.linspace(-RIDGE_SD, RIDGE_SD, RIDGE_POINTS) * post.sd[li]
-    pts = np.repeat(base[None], shift.size, axis=0)
-    pts[:, li] = post.loc[li] + shift
-    pts[:, :S] = base[None, :S] + shift[:, None]
-    lp = np.asarray(post(pts), float)
-    peaks = [
-        i
-        for i in range(1, lp.size - 1)
-        if np.isfinite(lp[i]) and lp[i] >= lp[i - 1] and lp[i] >= lp[i + 1]
-    ]
-    peaks.sort(key=lambda i: -lp[i])
-    return [pts[i].copy() for i in peaks[:RIDGE_STARTS]]
-
-
-def laplace_covariance(post: GirderLogPosterior, theta: np.ndarray, h: float = 1e-3) -> np.ndarray:
-    """Inverse Hessian of -log p at theta (central differences, one batch); eigenvalues of the
-    Hessian floored at the smallest prior precision."""
-    D = theta.size
-    E = h * np.eye(D)
-    pts = [theta]
-    for i in range(D):
-        pts += [theta + E[i], theta - E[i]]
-    for i in range(D):
-        for j in range(i + 1, D):
-            pts += [
-                theta + E[i] + E[j],
-                theta + E[i] - E[j],
-                theta - E[i] + E[j],
-                theta - E[i] - E[j],
-            ]
-    f = -post(np.array(pts))
-    f0 = f[0]
-    H = np.zeros((D, D))
-    k = 1
-    for i in range(D):
-        H[i, i] = (f[k] - 2 * f0 + f[k + 1]) / h**2
-        k += 2
-    for i in range(D):
-        for j in range(i + 1, D):
-            H[i, j] = H[j, i] = (f[k] - f[k + 1] - f[k + 2] + f[k + 3]) / (4 * h**2)
-            k += 4
-    if not np.all(np.isfinite(H)):
-        return np.diag(post.sd**2)
-    lam, V = np.linalg.eigh(0.5 * (H + H.T))
-    lam = np.maximum(lam, 1.0 / float(np.max(post.sd)) ** 2)
-    return (V / lam) @ V.T
-
-
-def _model(
-    template: Girder,
-    vehicle: Vehicle,
-    data: Measurements,
-    n_modes: int,
-    springs: bool,
-    n_elements: int,
-) -> GirderModalModel:
-    a_u, a_xx = data.weights
-    return GirderModalModel(
-        template,
-        vehicle,
-        data.x,
-        data.t,
-        a_u,
-        a_xx,
-        n_modes=n_modes,
-        infer_springs=springs,
-        n_elements=n_elements,
-    )
-
-
-def choose_girder_modes(
-    template: Girder,
-    vehicle: Vehicle,
-    data: Measurements,
-    post: GirderLogPosterior,
-    theta: np.ndarray,
-    sigma: float,
-    n_elements: int = 96,
-) -> tuple[int, float]:
-    """Smallest n in MODE_STEPS whose predictions at theta differ from 2 n modes by at most
-    TRUNCATION_FRACTION x sigma (or 1e-9 of the data RMS); returns (n, that largest difference)."""
-    scale = float(np.sqrt(np.mean(np.asarray(data.value, float) ** 2)))
-    tol = max(TRUNCATION_FRACTION * sigma, 1e-9 * scale)
-    EI, ks, lf = post.unpack(theta)
-    springs = post.layout.infer_springs
-    err = float("nan")
-    for n in MODE_STEPS:
-        p1 = _model(template, vehicle, data, n, springs, n_elements).predict(EI, ks, lf)
-        p2 = _model(template, vehicle, data, 2 * n, springs, n_elements).predict(EI, ks, lf)
-        err = float(np.max(np.abs(p1 - p2)))
-        if err <= tol:
-            return n, err
-    return MODE_STEPS[-1], err
-
-
-# --------------------------------------------------------------------------------------------------
-# emcee driver
-
-
-@dataclass
-class GirderChains:
-    """theta draws (group, draw, dim) with their log densities (group, draw), and run facts."""
-
-    theta: np.ndarray
-    lp: np.ndarray
-    tau: float
-    tau_per_parameter: np.ndarray
-    steps: int
-    burn: int
-    thin: int
-    walkers: int
-    acceptance: float
-
-
-def run_emcee(
-    log_prob,
-    center: np.ndarray,
-    cov: np.ndarray,
-    settings: GirderMCMCSettings | None = None,
-    seed: int | np.random.SeedSequence = 0,
-) -> GirderChains:
-    """Sample a vectorised log density (theta (W, D) -> (W,)) with `n_groups` independent emcee
-    ensembles started from N(center, start_scale^2 cov) (draws outside the support redrawn).
-    A function of the seed."""
-    import emcee
-
-    s = settings or GirderMCMCSettings()
-    center = np.asarray(center, float)
-    D = center.size
-    nw = s.walkers_per_group(D)
-    C = np.linalg.cholesky(np.atleast_2d(cov) + 1e-300 * np.eye(D))
-    samplers, states = [], []
-    for g in range(s.n_groups):
-        r = np.random.default_rng(seeding.child(seed, "emcee", g))
-        p0 = center + s.start_scale * r.standard_normal((nw, D)) @ C.T
-        for _ in range(200):
-            bad = ~np.isfinite(log_prob(p0))
-            if not bad.any():
-                break
-            p0[bad] = center + 0.5 * s.start_scale * r.standard_normal((int(bad.sum()), D)) @ C.T
-        else:
-            raise RuntimeError("could not start the walkers inside the posterior's support")
-        moves = None if s.moves == "stretch" else emcee.moves.DEMove()
-        sampler = emcee.EnsembleSampler(nw, D, log_prob, moves=moves, vectorize=True)
-        rs = np.random.RandomState(seeding.int_seed(seeding.child(seed, "emcee", 1000 + g)) % 2**32)
-        sampler.random_state = rs.get_state()
-        samplers.append(sampler)
-        states.append(p0)
-    logging.getLogger("emcee").setLevel(logging.ERROR)
-    steps, tau, tau_prev = 0, float("nan"), float("nan")
-    tau_dim = np.full(D, np.nan)
-    while True:
-        for i, sm in enumerate(samplers):
-            states[i] = sm.run_mcmc(states[i], s.chunk, progress=False)
-        steps += s.chunk
-        if steps < s.min_steps:
-            continue
-        per = np.array(
-            [
-                emcee.autocorr.integrated_time(sm.get_chain()[steps // 3 :], quiet=True)
-                for sm in samplers
-            ]
-        )
-        tau_dim = per.max(axis=0)
-        tau = float(tau_dim.max())
-        burn = int(math.ceil(s.burn_factor * tau))
-        long_enough = steps - burn >= s.tau_factor * tau
-        stable = math.isfinite(tau_prev) and abs(tau - tau_prev) <= s.tau_rtol * tau
-        if (long_enough and stable) or steps >= s.max_steps:
-            if not (long_enough and stable):
-                warnings.warn(
-                    f"girder MCMC stopped at max_steps={s.max_steps} with tau={tau:.1f} "
-                    f"(needs {s.tau_factor:g} tau after burn-in, tau stable to {s.tau_rtol:g})",
-                    RuntimeWarning,
-                    stacklevel=3,
-                )
-            break
-        tau_prev = tau
-    burn = min(int(math.ceil(s.burn_factor * tau)), steps // 2)
-    thin = max(1, int(tau / 4))
-
-    def grouped(a: np.ndarray) -> np.ndarray:  # (step, walker, ...) -> (walker * step, ...)
-        return np.swapaxes(a, 0, 1).reshape((-1,) + a.shape[2:])
-
-    theta = np.stack([grouped(sm.get_chain(discard=burn, thin=thin)) for sm in samplers])
-    lp = np.stack([grouped(sm.get_log_prob(discard=burn, thin=thin)) for sm in samplers])
-    acc = float(np.mean([sm.acceptance_fraction.mean() for sm in samplers]))
-    return GirderChains(theta, lp, tau, tau_dim, steps, burn, thin, nw * s.n_groups, acc)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -804,7 +358,7 @@ def girder_posterior(
         )
 
     def build(tmpl: Girder, n_modes: int) -> GirderLogPosterior:
-        m = _model(tmpl, vehicle, data, n_modes, infer_springs, n_elements)
+        m = surrogate_model(tmpl, vehicle, data, n_modes, infer_springs, n_elements)
         return GirderLogPosterior(m, y, lay, ei_prior, k_prior, lf_sd, ar1)
 
     # MAP on a surrogate referenced at the prior centre, then re-referenced at the MAP
