@@ -66,231 +66,64 @@ from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
 from ..threads import torch_threads
-from .lastlayer import (
-    GRID_EDGE,
-    IDENTIFIED_FRACTION,
-    LastLayer,
-    LastLayerPredictor,
-    log_prior_z,
+from .ensemble_marginal import (
+    AR1_GRID_HALF_WIDTH,
+    AR1_GRID_POINTS,
+    MARGINAL_HALF_WIDTH,
+    MARGINAL_POINTS,
+    MARGINAL_TRIES,
+    MARGINAL_WIDEN,
+    SIGMA_GRID_HALF_WIDTH,
+    SIGMA_GRID_POINTS,
+    MemberMarginal,
+    SigmaGrid,
+    ar1_grid,
+    local_sd,
+    member_marginal,
+    pool_log_ei,
+    sigma_grid,
 )
-from .lastlayer_grid import log_marginal_grid
-from .pinn_ar1 import AR1Posterior
+from .ensemble_pool import MAX_SCATTER_RATIO, N_DRAWS, _Phase, pooled_posterior
+from .lastlayer import LastLayer
 from .posterior import Posterior
 from .priors import EIPrior, NoisePrior, prior_only
 from .shared_fit import key as fit_key
 from .shared_fit import member_fit, member_seed, remember
 
+#: its public names, with those of its parts in their own modules (`ensemble_marginal`: each member's
+#: noise grid and marginal of EI; `ensemble_pool`: the pooled posterior), importable from here
+__all__ = [
+    "AR1_GRID_HALF_WIDTH",
+    "AR1_GRID_POINTS",
+    "MARGINAL_HALF_WIDTH",
+    "MARGINAL_POINTS",
+    "MARGINAL_TRIES",
+    "MARGINAL_WIDEN",
+    "MAX_SCATTER_RATIO",
+    "N_DRAWS",
+    "RTO_FRACTION",
+    "SIGMA_GRID_HALF_WIDTH",
+    "SIGMA_GRID_POINTS",
+    "MemberMarginal",
+    "MemberTask",
+    "SigmaGrid",
+    "ar1_grid",
+    "ensemble_posterior",
+    "local_sd",
+    "member_marginal",
+    "phase2_settings",
+    "pool_log_ei",
+    "pooled_posterior",
+    "rto_inputs",
+    "rto_rho",
+    "sigma_grid",
+    "train_member",
+]
+
 log = logging.getLogger(__name__)
 
 #: share of the profile's Adam steps spent in the randomise-then-optimise phase
 RTO_FRACTION = 0.25
-#: posterior draws stored
-N_DRAWS = 4000
-#: members scattering more than this many times their own local sd are flagged as not converged
-#: (with 5 members the sample sd is itself uncertain by ~35 %, so 3x is far outside chance)
-MAX_SCATTER_RATIO = 3.0
-
-
-#: the grid of log sigma: this many points over +-`SIGMA_GRID_HALF_WIDTH` around the fit's residual level
-SIGMA_GRID_POINTS = 241
-SIGMA_GRID_HALF_WIDTH = 1.2
-
-
-@dataclass(frozen=True)
-class SigmaGrid:
-    """p(log sigma | EI, y) of a last-layer model on a grid (log-uniform prior on sigma); with AR(1) noise
-    p(log sigma, z | EI, y) on a grid of both (``z`` the axis of z = atanh rho, ``prob`` (sigma, z))."""
-
-    log_sigma: np.ndarray
-    prob: np.ndarray
-    z: np.ndarray | None = None
-
-    @property
-    def mode(self) -> float:
-        """sigma's mode (of its marginal where the grid has a z axis)."""
-        p = self.prob if self.z is None else self.prob.sum(axis=1)
-        return float(np.exp(self.log_sigma[int(np.argmax(p))]))
-
-    @property
-    def z_mode(self) -> float | None:
-        """The mode of z = atanh rho's marginal, or None for white noise."""
-        if self.z is None:
-            return None
-        return float(self.z[int(np.argmax(self.prob.sum(axis=0)))])
-
-    def draws(self, k: int, rng: np.random.Generator) -> np.ndarray:
-        """k draws of sigma: a grid cell by its probability, uniform within it."""
-        h = self.log_sigma[1] - self.log_sigma[0]
-        i = rng.choice(self.prob.size, size=k, p=self.prob)
-        return np.exp(self.log_sigma[i] + h * (rng.random(k) - 0.5))
-
-    def draws_ar1(self, k: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        """k joint draws of (sigma, rho) from the two-dimensional grid (a cell by its probability, uniform
-        within it)."""
-        hs, hz = self.log_sigma[1] - self.log_sigma[0], self.z[1] - self.z[0]
-        flat = rng.choice(self.prob.size, size=k, p=self.prob.ravel())
-        i, j = np.unravel_index(flat, self.prob.shape)
-        u = rng.random((2, k)) - 0.5
-        return np.exp(self.log_sigma[i] + hs * u[0]), np.tanh(self.z[j] + hz * u[1])
-
-
-def sigma_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
-    """The noise level's posterior for one member at its fitted EI (see the module docstring); with the
-    SNR-conditioned noise prior its log-normal density is added (as in the B-PINN). With AR(1) noise the
-    joint posterior of sigma and the coefficient (`ar1_grid`)."""
-
-    if ll.ar1 is not None:
-        return ar1_grid(ll, noise)
-
-    center = 0.5 * math.log(max(ll.fit_rss, 1e-300) / max(ll.n, 1))
-    grid = center + np.linspace(-SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_HALF_WIDTH, SIGMA_GRID_POINTS)
-    with torch_threads(1):
-        lp = log_marginal_grid(ll, math.log(ll.theta_fit), grid)
-    if noise.kind == "snr":
-        lp = lp - 0.5 * ((grid - math.log(noise.center)) / noise.log_sd) ** 2
-    if int(np.argmax(lp)) in (0, grid.size - 1):
-        log.warning(
-            "[ensemble] the noise level's posterior reaches the edge of its grid (%.3g .. %.3g)",
-            math.exp(grid[0]),
-            math.exp(grid[-1]),
-        )
-    p = np.exp(lp - lp.max())
-    return SigmaGrid(grid, p / p.sum())
-
-
-#: the AR(1) noise grid: points per axis, and its half-width in Laplace sds of each axis
-AR1_GRID_POINTS = 41
-AR1_GRID_HALF_WIDTH = 6.0
-
-
-def ar1_grid(ll: LastLayer, noise: NoisePrior) -> SigmaGrid:
-    """p(log sigma, z | EI_fit, y) of a last-layer model with AR(1) noise, z = atanh rho under rho's uniform
-    prior, on a grid of AR1_GRID_POINTS^2 around its mode (+-AR1_GRID_HALF_WIDTH Laplace sds of each): the
-    mode by L-BFGS from the fit residuals' level and lag-1 autocorrelation, the sds from the Hessian there."""
-    import torch
-    from scipy.optimize import minimize
-
-    from .ar1 import Z_MAX
-
-    T = lambda v: torch.tensor(v, dtype=torch.float64)  # noqa: E731
-    lt = T(math.log(ll.theta_fit))
-
-    def logp(ls, z):
-        out = ll.log_marginal(lt, ls, z) + log_prior_z(z)
-        if noise.kind == "snr":
-            out = out - 0.5 * ((ls - math.log(noise.center)) / noise.log_sd) ** 2
-        return out
-
-    def neg(v):
-        x = torch.tensor(v, dtype=torch.float64, requires_grad=True)
-        f = -logp(x[0], x[1])
-        (g,) = torch.autograd.grad(f, x)
-        return float(f.detach()), g.numpy()
-
-    x0 = [0.5 * math.log(max(ll.fit_rss, 1e-300) / max(ll.n, 1)), ll.z_start()]
-    with torch_threads(1):
-        opt = minimize(neg, x0, jac=True, method="L-BFGS-B", bounds=[(None, None), (-Z_MAX, Z_MAX)])
-        H = torch.autograd.functional.hessian(lambda x: -logp(x[0], x[1]), T(opt.x))
-    H = H.numpy()
-    try:
-        cov = np.linalg.inv(H)
-        sd = np.sqrt(np.diag(cov))
-        ok = bool(np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0))
-    except np.linalg.LinAlgError:
-        ok = False
-    if not ok:  # no curvature at the optimum: a wide grid
-        log.warning(
-            "[ensemble] the AR(1) noise posterior has no curvature at its mode; using a wide grid"
-        )
-        sd = np.array([0.2, 0.2])
-    h = AR1_GRID_HALF_WIDTH
-    ls_ax = opt.x[0] + np.linspace(-h * sd[0], h * sd[0], AR1_GRID_POINTS)
-    z_ax = np.clip(opt.x[1] + np.linspace(-h * sd[1], h * sd[1], AR1_GRID_POINTS), -Z_MAX, Z_MAX)
-    with torch.no_grad(), torch_threads(1):
-        # z outer: the last layer reuses its first-mode block across sigma (`LastLayer._vary_block`)
-        lp = np.array([[float(logp(T(a), T(b))) for a in ls_ax] for b in z_ax]).T
-    p = np.exp(lp - lp.max())
-    if max(p[0].max(), p[-1].max(), p[:, 0].max(), p[:, -1].max()) > 1e-4:
-        log.warning("[ensemble] the AR(1) noise posterior reaches the edge of its grid")
-    return SigmaGrid(ls_ax, p / p.sum(), z_ax)
-
-
-#: a member's marginal of log EI: grid points over +-MARGINAL_HALF_WIDTH local sds, re-centred on the peak
-#: and widened (x MARGINAL_WIDEN) up to MARGINAL_TRIES times until both ends hold less than GRID_EDGE of it
-MARGINAL_POINTS = 321
-MARGINAL_HALF_WIDTH = 8.0
-MARGINAL_WIDEN = 2.0
-MARGINAL_TRIES = 5
-
-
-@dataclass(frozen=True)
-class MemberMarginal:
-    """p(log EI | y, a member's features, sigma at its mode) on a grid: the member's posterior of EI."""
-
-    log_ei: np.ndarray
-    prob: np.ndarray
-
-    @property
-    def mean(self) -> float:
-        return float((self.prob * self.log_ei).sum())
-
-    @property
-    def var(self) -> float:
-        return float((self.prob * (self.log_ei - self.mean) ** 2).sum())
-
-    def draws(self, k: int, rng: np.random.Generator) -> np.ndarray:
-        """k draws of log EI: a grid cell by its probability, uniform within it."""
-        h = self.log_ei[1] - self.log_ei[0]
-        i = rng.choice(self.prob.size, size=k, p=self.prob)
-        return self.log_ei[i] + h * (rng.random(k) - 0.5)
-
-
-def member_marginal(
-    ll: LastLayer, grid: SigmaGrid, ei_prior: EIPrior, log_shift: float, sd: float
-) -> MemberMarginal | None:
-    """Member's exact last-layer marginal of log EI on the measured data (sigma, and an AR(1)
-    coefficient, held at their modes), times the EI prior; log EI = log theta + `log_shift`. The grid
-    starts at the member's trained EI, `sd` (its local width) sets its step, and it follows the peak:
-    the trained EI can sit several local widths from the marginal's mean (module docstring). None when
-    there is no width (`sd` nan) or the density never falls off within the grid."""
-
-    if not (math.isfinite(sd) and sd > 0):
-        return None
-    centre, half = math.log(ll.theta_fit), MARGINAL_HALF_WIDTH * sd
-    ls = math.log(grid.mode)
-    for _ in range(MARGINAL_TRIES):
-        g = centre + np.linspace(-half, half, MARGINAL_POINTS)
-        lp = log_marginal_grid(ll, g, ls, grid.z_mode)
-        lp = lp - 0.5 * ((g + log_shift - ei_prior.loc) / ei_prior.log_sd) ** 2
-        p = np.exp(lp - lp.max())
-        if max(p[0], p[-1]) < GRID_EDGE:
-            return MemberMarginal(g + log_shift, p / p.sum())
-        centre, half = float(g[int(np.argmax(p))]), half * MARGINAL_WIDEN
-    return None
-
-
-def pool_log_ei(
-    log_ei_fit: np.ndarray, marginals: list, prior_log_sd: float
-) -> tuple[float, float, float, float, float]:
-    """(mean, between-member variance, mean local variance, members with a marginal, ensemble variance) of
-    log EI.
-
-    The ensemble's posterior is the equal mixture of its members' marginals (module docstring): mean the
-    mean of their means, variance the mean of their variances plus the variance of their means. Members
-    without a marginal (None) are left out. With no member's marginal the trained EIs stand for the
-    posterior: their mean, variance between (1 + 1 / M); with one member and none, the prior's variance.
-    """
-    log_ei_fit = np.asarray(log_ei_fit, float)
-    M = log_ei_fit.size
-    ok = [m for m in marginals if m is not None]
-    if ok:
-        means = np.array([m.mean for m in ok])
-        between = float(np.var(means))
-        lap_var = float(np.mean([m.var for m in ok]))
-        return float(means.mean()), between, lap_var, float(len(ok)), lap_var + between
-    between = float(np.var(log_ei_fit, ddof=1)) if M > 1 else 0.0
-    pooled = between * (1.0 + 1.0 / M) if M > 1 else prior_log_sd**2
-    return float(log_ei_fit.mean()), between, 0.0, 0.0, pooled
 
 
 def _rto_data(
@@ -306,24 +139,6 @@ def _rto_data(
     return tuple(
         data.with_values(data.value + sigma * ar1_noise(rng.standard_normal(len(data)), data, rho))
         for _ in range(M)
-    )
-
-
-@dataclass(frozen=True)
-class _Phase:
-    """One training phase of M members, as either path (batched or one task per member) returns it."""
-
-    EI: np.ndarray  # (M,) [N m^2], beta-corrected
-    beta_factor: np.ndarray  # (M,)
-    grids: list  # SigmaGrid per member, on the measured data
-    last_layers: list | None  # LastLayer per member (phase 2)
-    states: list | None  # per-member state dicts (phase 1, the warm start of phase 2; task path)
-    state: dict | None  # the batched state (batched path)
-    runtime_s: float  # training time, summed over members when they ran as separate tasks
-    fit0: object = None  # phase 1, task path: member 0's FitResult (the B-PINN's warm start)
-    lap_sd: np.ndarray | None = None  # phase 2, task path: each member's local width (in its task)
-    marginals: list | None = (
-        None  # phase 2, task path: each member's marginal of log EI (in its task)
     )
 
 
@@ -619,14 +434,6 @@ def ensemble_posterior(
     return pooled_posterior(p1, p2, sigma_hat, base, ei_prior, seed, M, training, t0)
 
 
-def local_sd(ll: LastLayer, grid: SigmaGrid, ei_prior: EIPrior) -> float:
-    """A member's own width of log EI: the sd of its last-layer marginal at its noise level's mode (and, with
-    AR(1) noise, its coefficient's)."""
-    return ll.local_sd_log_theta(
-        math.log(ll.theta_fit), math.log(grid.mode), ei_prior.log_sd, z=grid.z_mode
-    )
-
-
 def phase2_settings(settings):
     """Randomise-then-optimise trains RTO_FRACTION of the profile's steps at 0.3 x its learning rate."""
     return replace(
@@ -650,145 +457,3 @@ def rto_rho(grids: list) -> float | None:
     if grids[0].z is None:
         return None
     return float(np.tanh(np.median([g.z_mode for g in grids])))
-
-
-def pooled_posterior(
-    p1: _Phase,
-    p2: _Phase,
-    sigma_hat: float,
-    base,
-    ei_prior: EIPrior,
-    seed,
-    M: int,
-    training: str,
-    t0: float,
-    runtime_s: float | None = None,
-    lap_sd: np.ndarray | None = None,
-) -> Posterior:
-    """The ensemble's posterior from its two phases: members' local widths (`lap_sd`, computed here from
-    phase 2's last layers unless given) pooled with their spread."""
-    member_EI = p2.EI
-    log_ei_m = np.log(member_EI)
-    # per member, on the measured data: the noise level's grid posterior, the local width of log EI and
-    # the member's marginal of log EI (its posterior given its features), centred where the data put it
-    lls, grids = p2.last_layers, p2.grids
-    shifts = [math.log(base.EI_ref) - math.log(f) for f in p2.beta_factor]
-    if lap_sd is None:
-        lap_sd = p2.lap_sd
-    with torch_threads(1):
-        if lap_sd is None:
-            lap_sd = np.array([local_sd(ll, g, ei_prior) for ll, g in zip(lls, grids, strict=True)])
-        marginals = p2.marginals
-        if marginals is None:
-            marginals = [
-                member_marginal(ll, g, ei_prior, sh, float(sd))
-                for ll, g, sh, sd in zip(lls, grids, shifts, lap_sd, strict=True)
-            ]
-    mu, between, lap_var, n_marg, pooled = pool_log_ei(log_ei_m, marginals, ei_prior.log_sd)
-    warn = []
-    bad = [i for i, m in enumerate(marginals) if m is None]
-    if bad:
-        warn.append(
-            f"member(s) {bad}: the last-layer marginal likelihood has no peak in EI near the member's own "
-            "fit, so they give no posterior of their own; the interval rests on the other members"
-            + ("" if n_marg else " (none has one: on the spread between the trained members)")
-        )
-    draw_rng = np.random.default_rng(seeding.child(seed, "ensemble", 0))
-    ok = [m for m in marginals if m is not None]
-    if ok:  # the equal mixture of the members' marginals
-        log_ei = np.concatenate([m.draws(-(-N_DRAWS // len(ok)), draw_rng) for m in ok])[:N_DRAWS]
-        log_ei = log_ei[draw_rng.permutation(N_DRAWS)]
-    else:
-        log_ei = mu + math.sqrt(pooled) * draw_rng.standard_normal(N_DRAWS)
-    rho = None
-    if grids[0].z is None:
-        sigma = np.concatenate([g.draws(-(-N_DRAWS // M), draw_rng) for g in grids])[:N_DRAWS]
-        sigma = sigma[draw_rng.permutation(N_DRAWS)]
-    else:  # AR(1): sigma and rho jointly, from each member's grid
-        sr = [g.draws_ar1(-(-N_DRAWS // M), draw_rng) for g in grids]
-        perm = draw_rng.permutation(N_DRAWS)
-        sigma = np.concatenate([a for a, _ in sr])[:N_DRAWS][perm]
-        rho = np.concatenate([b for _, b in sr])[:N_DRAWS][perm]
-    ident = bool(math.sqrt(pooled) < IDENTIFIED_FRACTION * ei_prior.log_sd)
-    info = {
-        "members": M,
-        "member_EI": member_EI.tolist(),
-        "member_posterior_EI": [None if m is None else math.exp(m.mean) for m in marginals],
-        "member_local_sd_log_EI": [None if m is None else math.sqrt(m.var) for m in marginals],
-        "fit_between_sd_log_EI": float(np.std(log_ei_m, ddof=1)) if M > 1 else 0.0,
-        "between_sd_log_EI": math.sqrt(between),
-        "local_sd_log_EI": math.sqrt(lap_var),
-        "pooling": (
-            f"equal mixture of {n_marg:g} members' last-layer marginals of EI"
-            if n_marg
-            else f"the {M} trained EIs: their spread x (1 + 1/{M})"
-        ),
-        "sigma_hat_rto": sigma_hat,
-        "member_sigma_mode": [g.mode for g in grids],
-        **(
-            {"member_noise_ar1_mode": [math.tanh(g.z_mode) for g in grids]}
-            if rho is not None
-            else {}
-        ),
-        "member_first_mode_follows_EI": [ll.first_mode_varies for ll in lls],
-        "identified": ident,
-    }
-    if M == 1:
-        info["note"] = "a single member has no spread: its interval is its own local width only"
-    if not ident:
-        info["note"] = "EI is not identified by these data"
-    # self-check: members whose posteriors' means scatter far more than each one's own width read EI
-    # differently from their features; the mixture is then mostly the spread between networks
-    if n_marg > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var:
-        msg = (
-            f"the members disagree: their posteriors' means spread by sd {math.sqrt(between):.3f} in log EI, "
-            f"{math.sqrt(between / lap_var):.1f} x each member's own width ({math.sqrt(lap_var):.3f}); "
-            "the networks have not converged to one answer, so this interval mostly measures their scatter"
-        )
-        warn.append(msg)
-    for msg in warn:
-        log.warning("[ensemble] %s", msg)
-    if warn:
-        info["warnings"] = warn
-    diag = {
-        "fit_runtime_s": p1.runtime_s + p2.runtime_s,
-        "beta_factor": float(np.median(p2.beta_factor)),
-        "training": training,
-    }
-    predictor = _MixturePredictor(
-        [
-            LastLayerPredictor(
-                ll,
-                np.full(64, math.log(ll.theta_fit)) if m is None else m.draws(64, draw_rng) - sh,
-                np.full(64, math.log(g.mode)),
-                sh,
-                None if g.z is None else np.full(64, g.z_mode),
-            )
-            for ll, g, sh, m in zip(lls, grids, shifts, marginals, strict=True)
-        ]
-    )
-    kw = dict(
-        diagnostics=diag,
-        info=info,
-        runtime_s=time.perf_counter() - t0 if runtime_s is None else runtime_s,
-        predictor=predictor,
-    )
-    if rho is not None:
-        return AR1Posterior(
-            "ensemble", np.exp(log_ei)[None, :], sigma[None, :], ar1=rho[None, :], **kw
-        )
-    return Posterior("ensemble", np.exp(log_ei)[None, :], sigma[None, :], **kw)
-
-
-class _MixturePredictor:
-    """Predictive draws split evenly over the members' own last-layer predictives."""
-
-    def __init__(self, parts: list):
-        self.parts = parts
-
-    def __call__(
-        self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
-    ) -> np.ndarray:
-        rng = rng or np.random.default_rng(0)
-        k = max(1, n_draws // len(self.parts))
-        return np.concatenate([p(x, t, quantity, k, rng) for p in self.parts])

@@ -29,16 +29,9 @@ from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
 from ..threads import torch_threads
-from .ensemble import (
-    _last_layer,
-    _Phase,
-    ensemble_posterior,
-    local_sd,
-    phase2_settings,
-    pooled_posterior,
-    rto_inputs,
-    sigma_grid,
-)
+from .ensemble import _last_layer, ensemble_posterior, phase2_settings, rto_inputs
+from .ensemble_marginal import local_sd, sigma_grid
+from .ensemble_pool import _Phase, pooled_posterior
 from .posterior import Posterior
 from .priors import EIPrior, NoisePrior
 
