@@ -84,9 +84,38 @@ from ..pinn.network import PINN
 from ..pinn.problem import Problem
 from ..pinn.taylor import Jet
 from .ar1 import AR1Noise, lag1
-from .priors import EIPrior
+from .lastlayer_algebra import _cholesky, _log_cosh, _pieces, feature_jet, log_prior_z
+from .lastlayer_posterior import (
+    GRID_DOUBLINGS,
+    GRID_EDGE,
+    GRID_HALF_WIDTH,
+    GRID_POINTS,
+    IDENTIFIED_FRACTION,
+    LastLayerPosterior,
+    LastLayerPredictor,
+    identified,
+)
 
 log = logging.getLogger(__name__)
+
+#: its public names, with those of its parts in their own modules (`lastlayer_algebra`: the basis jet and
+#: the tensor algebra; `lastlayer_posterior`: what the built marginal says), importable from here
+__all__ = [
+    "GRID_DOUBLINGS",
+    "GRID_EDGE",
+    "GRID_HALF_WIDTH",
+    "GRID_POINTS",
+    "IDENTIFIED_FRACTION",
+    "MIN_PSEUDO_SD",
+    "PDE_SD_FACTOR",
+    "VIBRATION_FALSE_ALARM",
+    "WEIGHT_PRIOR_FACTOR",
+    "LastLayer",
+    "LastLayerPredictor",
+    "feature_jet",
+    "identified",
+    "log_prior_z",
+]
 
 #: floor of the pseudo-observation sds (non-dimensional), so a perfect fit cannot make them singular
 MIN_PSEUDO_SD = 1e-6
@@ -96,76 +125,9 @@ PDE_SD_FACTOR = 10.0
 VIBRATION_FALSE_ALARM = 0.01
 #: prior sd of the stiffness-scaled output weights gamma, as a multiple of the largest fitted one
 WEIGHT_PRIOR_FACTOR = 10.0
-#: `local_sd_log_theta`'s grid: points, starting half-width in Laplace sds, doublings allowed, and the
-#: density (relative to the peak) its ends must fall below (1e-4: the tails beyond hold < 1e-4 of the mass
-#: of a Gaussian, so the sd is off by less than 0.1 %)
-GRID_POINTS = 321
-GRID_HALF_WIDTH = 6.0
-GRID_DOUBLINGS = 4
-GRID_EDGE = 1e-4
 
 
-def feature_jet(
-    model: PINN, member: int, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int
-) -> Jet:
-    """Jet of the output layer's basis functions (N, D) of one member at points (N,), float64.
-
-    The basis is `PINN.basis_jet`: the last hidden layer's activations, the constant (the output bias),
-    and with the fast profile's options the static enrichment and the free vibrations.
-    """
-    net = (
-        model
-        if (model.members == 1 and member == 0 and model.log_ei.dtype == torch.float64)
-        else (model.member(member).double())
-    )
-    with torch.no_grad():
-        j = net.basis_jet(xi.double().unsqueeze(0), tau.double().unsqueeze(0), kx, kt)
-    return j.map(lambda c: c[0])
-
-
-def _cholesky(A: torch.Tensor) -> torch.Tensor:
-    """Cholesky factor of a precision that is positive definite in exact arithmetic (positive semi-definite
-    data and physics terms plus the weights' prior): where rounding in its largest terms loses definiteness,
-    the smallest diagonal jitter (1e-14 to 1e-6 of its largest diagonal entry) that restores it."""
-    L, info = torch.linalg.cholesky_ex(A)
-    if int(info) == 0:
-        return L
-    top = A.detach().diagonal().abs().max()
-    eye = torch.eye(A.shape[-1], dtype=A.dtype)
-    for k in range(-14, -5):
-        L, info = torch.linalg.cholesky_ex(A + (10.0**k * top) * eye)
-        if int(info) == 0:
-            log.debug("last layer: precision made definite with jitter 1e%d of its diagonal", k)
-            return L
-    raise torch.linalg.LinAlgError(
-        f"the last layer's precision is not positive definite (leading minor {int(info)}) even with "
-        "a jitter of 1e-6 of its largest diagonal entry"
-    )
-
-
-def _t(X: torch.Tensor) -> torch.Tensor:
-    return X.T if X.dim() == 2 else X
-
-
-def _pieces(Xf, Xc, Xp, Yf, Yc, Yp) -> tuple:
-    """(Xf'Yf, Xc'Yc, Xc'Yp + Xp'Yc, Xp'Yp): with rho and c2 = 1 / (1 - rho^2), X'P(rho)Y is
-    Xf'Yf + c2 (Xc'Yc - rho (Xc'Yp + Xp'Yc) + rho^2 Xp'Yp) for the first (f), current (c) and previous (p)
-    rows of the noise series (`ar1.AR1Noise`)."""
-    return (_t(Xf) @ Yf, _t(Xc) @ Yc, _t(Xc) @ Yp + _t(Xp) @ Yc, _t(Xp) @ Yp)
-
-
-def _log_cosh(z: torch.Tensor) -> torch.Tensor:
-    a = z.abs()
-    return a + torch.log1p(torch.exp(-2.0 * a)) - math.log(2.0)
-
-
-def log_prior_z(z: torch.Tensor) -> torch.Tensor:
-    """log density of z = atanh rho under a uniform rho on (-1, 1): log sech^2 z (the torch twin of
-    `ar1.AR1Noise.log_prior`, differentiable)."""
-    return -2.0 * _log_cosh(z)
-
-
-class LastLayer:
+class LastLayer(LastLayerPosterior):
     """Exact marginal likelihood of (theta, sigma) for one trained member; see the module docstring.
 
     The first mode's free-vibration columns (`enrich.FreeVibration.lowest`, the trailing `nv` columns of
@@ -478,133 +440,3 @@ class LastLayer:
         if z is not None:  # the whitening's Jacobian, -((n - m)/2) log(1 - rho^2)
             out = out + (self.ar1.n - self.ar1.m) * _log_cosh(z)
         return out
-
-    def weights_posterior(
-        self, log_theta: float, log_sigma: float, z: float | None = None
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """Mean (k,) and covariance (k, k) of the output weights beta = gamma / theta given theta, sigma (and
-        the AR(1) coefficient's z, default `self.z`)."""
-        with torch.no_grad():
-            A, b, *_ = self._system(
-                torch.tensor(log_theta, dtype=torch.float64),
-                torch.tensor(log_sigma, dtype=torch.float64),
-                z,
-            )
-            Lc = _cholesky(A)
-            mean = torch.cholesky_solve(b.unsqueeze(-1), Lc).squeeze(-1)
-            cov = torch.cholesky_inverse(Lc)
-        it = math.exp(-log_theta)
-        return mean * it, cov * it**2
-
-    def laplace_sd_log_theta(
-        self, log_theta: float, log_sigma: float, prior_sd: float, z: float | None = None
-    ) -> float:
-        """sd of log theta from the curvature of the log marginal (sigma held) plus the prior's; nan when the
-        log marginal is not concave in log theta there (no local width to report)."""
-        lt = torch.tensor(log_theta, dtype=torch.float64, requires_grad=True)
-        ls = torch.tensor(log_sigma, dtype=torch.float64)
-        (g,) = torch.autograd.grad(self.log_marginal(lt, ls, z), lt, create_graph=True)
-        (h,) = torch.autograd.grad(g, lt)
-        if not -float(h) > 0:
-            return float("nan")
-        return 1.0 / math.sqrt(-float(h) + 1.0 / prior_sd**2)
-
-    def local_sd_log_theta(
-        self,
-        log_theta: float,
-        log_sigma: float,
-        prior_sd: float,
-        points: int = GRID_POINTS,
-        z: float | None = None,
-    ) -> float:
-        """sd of log theta under the log marginal (sigma held) times the prior's curvature, on a grid
-        around log_theta: the Laplace width where the marginal is Gaussian, and the true width where it is
-        not (at 10 dB the first mode's frequency makes it skewed and heavy-tailed: measured on the quick
-        start's members, Laplace 1.8 % against 2.5 % from NUTS). The grid starts at +-GRID_HALF_WIDTH Laplace
-        sds (or the prior sd where there is no curvature) and doubles until its ends hold less than
-        GRID_EDGE of the peak density; nan when the density never falls (no local width). sigma (and the
-        AR(1) coefficient's z, default `self.z`) are held."""
-        lap = self.laplace_sd_log_theta(log_theta, log_sigma, prior_sd, z)
-        half = GRID_HALF_WIDTH * lap if math.isfinite(lap) else prior_sd
-        ls = torch.tensor(log_sigma, dtype=torch.float64)
-        from .lastlayer_grid import log_marginal_grid  # the grid as one batch
-
-        for _ in range(GRID_DOUBLINGS + 1):
-            g = log_theta + np.linspace(-half, half, points)
-            lp = log_marginal_grid(self, g, float(ls), z)
-            lp = lp - 0.5 * ((g - log_theta) / prior_sd) ** 2
-            p = np.exp(lp - lp.max())
-            if max(p[0], p[-1]) < GRID_EDGE:
-                p /= p.sum()
-                m = float((p * g).sum())
-                return math.sqrt(float((p * (g - m) ** 2).sum()))
-            half *= 2.0
-        return float("nan")
-
-    def predictive(
-        self,
-        x,
-        t,
-        kx: int,
-        draws_log_theta,
-        draws_log_sigma,
-        rng: np.random.Generator,
-        draws_z=None,
-    ) -> np.ndarray:
-        """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)
-        (and AR(1) coefficient's z, `draws_z`; default `self.z`)."""
-        sc = self.sc
-        T = lambda a: torch.as_tensor(np.array(a, float).ravel(), dtype=torch.float64)  # noqa: E731
-        xi, tau = T(x) / sc.L, T(t) / sc.T
-        j = feature_jet(self.model, self.member, xi, tau, kx, 0)
-        Phi_f = j.dx(kx)[:, : self.kf]
-        scale = sc.U / sc.L**kx
-        out = np.empty((len(draws_log_theta), Phi_f.shape[0]))
-        zs = [None] * len(draws_log_theta) if draws_z is None else draws_z
-        for i, (lt, ls, zz) in enumerate(zip(draws_log_theta, draws_log_sigma, zs, strict=True)):
-            mean, cov = self.weights_posterior(float(lt), float(ls), zz)
-            Phi = Phi_f
-            if self.fv is not None:
-                with torch.no_grad():
-                    jv = self._fv_jet(xi, tau, kx, 0, torch.tensor(float(lt), dtype=torch.float64))
-                Phi = torch.cat([Phi_f, jv.dx(kx)], dim=1)
-            Lc = torch.linalg.cholesky(cov + 1e-30 * torch.eye(self.k, dtype=torch.float64))
-            z = torch.as_tensor(rng.standard_normal(self.k), dtype=torch.float64)
-            out[i] = (Phi @ (mean + Lc @ z)).numpy() * scale
-        return out
-
-
-#: EI counts as identified when the posterior sd of log EI is below this fraction of the prior's
-IDENTIFIED_FRACTION = 0.5
-
-
-def identified(log_ei_draws: np.ndarray, prior: EIPrior) -> bool:
-    """Do the data move EI away from its prior? (posterior sd of log EI < half the prior sd)"""
-    return bool(np.std(log_ei_draws) < IDENTIFIED_FRACTION * prior.log_sd)
-
-
-class LastLayerPredictor:
-    """Posterior predictive of a last-layer model: deflection, curvature or moment for (EI, sigma) draws."""
-
-    def __init__(
-        self,
-        ll: LastLayer,
-        log_theta: np.ndarray,
-        log_sigma: np.ndarray,
-        shift: float,
-        z: np.ndarray | None = None,
-    ):
-        self.ll, self.lt, self.ls, self.shift, self.z = ll, log_theta, log_sigma, shift, z
-
-    def __call__(
-        self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
-    ) -> np.ndarray:
-        rng = rng or np.random.default_rng(0)
-        idx = rng.choice(self.lt.size, size=min(n_draws, self.lt.size), replace=False)
-        z = None if self.z is None else self.z[idx]
-        if quantity == "deflection":
-            return self.ll.predictive(x, t, 0, self.lt[idx], self.ls[idx], rng, z)
-        if quantity in ("curvature", "moment"):
-            k = self.ll.predictive(x, t, 2, self.lt[idx], self.ls[idx], rng, z)
-            return -np.exp(self.lt[idx] + self.shift)[:, None] * k if quantity == "moment" else k
-        raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
