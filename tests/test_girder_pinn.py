@@ -14,6 +14,7 @@ import torch
 
 from bayespinn.config import resolve
 from bayespinn.data.synthetic import simulate
+from bayespinn.uq import girder_net as N
 from bayespinn.uq import girder_pinn as G
 from bayespinn.uq.girder_reference import girder_reference
 
@@ -88,7 +89,7 @@ def test_enrichment_gradient_is_its_derivative(damaged):
     pr = G.GirderProblem(data, cfg)
     phi = torch.tensor(pr.phi0, dtype=torch.float64, requires_grad=True)
     w = torch.linspace(-1, 1, len(data), dtype=torch.float64)
-    (g,) = torch.autograd.grad(G.enrichment_column(pr, phi) @ w, phi)
+    (g,) = torch.autograd.grad(N.enrichment_column(pr, phi) @ w, phi)
     h = 1e-6  # the column's own central differences step 1e-4: truncation ~1e-5 relative
     for i in range(pr.n_phys):
         e = np.zeros(pr.dim)
@@ -110,15 +111,15 @@ def test_last_layer_marginal_is_the_dense_gaussian(last_layer):
         phit = torch.as_tensor(phi)
         ours.append(float(ll.log_marginal(phit, torch.tensor(np.log(sig), dtype=torch.float64))))
         sc = ll.scales(sig)
-        Ap, gp, kp = G.physics(pr, ll.P, phit, sc)
+        Ap, gp, kp = N.physics(pr, ll.P, phit, sc)
         mu = torch.linalg.solve(Ap, gp)
-        E = G.enrichment_column(pr, phit)
+        E = N.enrichment_column(pr, phit)
         D = torch.cat([ll.P.Phi_d, E[:, None]], 1)
         C = sig**2 * torch.eye(len(y), dtype=torch.float64) + D @ torch.linalg.solve(Ap, D.T)
         r = y - D @ mu
         dense.append(float(-0.5 * r @ torch.linalg.solve(C, r) - 0.5 * torch.linalg.slogdet(C)[1]))
         # physics as observations: the joint Gaussian of data and physics rows with c ~ N(0, s_w^2 I)
-        Ad, gd, kd = G.data_terms(pr, ll.P, E, sig)
+        Ad, gd, kd = N.data_terms(pr, ll.P, E, sig)
         A = Ap + Ad
         b = gp + gd
         obs.append(
