@@ -50,6 +50,7 @@ from scipy.linalg.lapack import dpotrf, dpotrs
 from ..config import Beam, Vehicle, _check_number
 from ..errors import InputError
 from ..threads import one_blas_thread
+from .hermite import _element_matrices, element_of, hermite
 
 
 def _as_list(name: str, value: Any) -> list:
@@ -164,76 +165,6 @@ class Girder:
             damping_ratio=beam.damping_ratio,
             rotational_stiffness=rotational_stiffness,
         )
-
-
-# --------------------------------------------------------------------------------------------------
-# Hermite cubic shape functions
-
-
-def hermite(xi: np.ndarray, h: float, deriv: int = 0) -> np.ndarray:
-    """d^k/dx^k of the four Hermite shape functions (w_i, theta_i, w_j, theta_j) at local xi in [0, 1].
-
-    Parameters
-    ----------
-    xi : array (P,), local coordinate (x - x_i) / h.
-    h : element length [m].
-    deriv : k in 0..3, the x-derivative order.
-
-    Returns
-    -------
-    array (4, P).
-    """
-    xi = np.asarray(xi, float)
-    one = np.ones_like(xi)
-    if deriv == 0:
-        rows = [
-            1 - 3 * xi**2 + 2 * xi**3,
-            h * (xi - 2 * xi**2 + xi**3),
-            3 * xi**2 - 2 * xi**3,
-            h * (xi**3 - xi**2),
-        ]
-    elif deriv == 1:
-        rows = [
-            (-6 * xi + 6 * xi**2) / h,
-            1 - 4 * xi + 3 * xi**2,
-            (6 * xi - 6 * xi**2) / h,
-            3 * xi**2 - 2 * xi,
-        ]
-    elif deriv == 2:
-        rows = [(-6 + 12 * xi) / h**2, (-4 + 6 * xi) / h, (6 - 12 * xi) / h**2, (-2 + 6 * xi) / h]
-    elif deriv == 3:
-        rows = [12 * one / h**3, 6 * one / h**2, -12 * one / h**3, 6 * one / h**2]
-    else:
-        raise InputError("deriv", deriv, "0, 1, 2 or 3")
-    return np.stack(rows)
-
-
-def element_of(x: np.ndarray, h: float, n_elements: int) -> tuple[np.ndarray, np.ndarray]:
-    """(element index, local xi) of positions x [m]: e = min(floor(x / h), n - 1), clipped at 0."""
-    x = np.asarray(x, float)
-    e = np.clip(np.floor(x / h).astype(int), 0, n_elements - 1)
-    return e, x / h - e
-
-
-def _element_matrices(h: float) -> tuple[np.ndarray, np.ndarray]:
-    """Unit-EI element stiffness and unit-mu consistent mass of a Hermite element of length h."""
-    k = (1.0 / h**3) * np.array(
-        [
-            [12, 6 * h, -12, 6 * h],
-            [6 * h, 4 * h**2, -6 * h, 2 * h**2],
-            [-12, -6 * h, 12, -6 * h],
-            [6 * h, 2 * h**2, -6 * h, 4 * h**2],
-        ]
-    )
-    m = (h / 420) * np.array(
-        [
-            [156, 22 * h, 54, -13 * h],
-            [22 * h, 4 * h**2, 13 * h, -3 * h**2],
-            [54, 13 * h, 156, -22 * h],
-            [-13 * h, -3 * h**2, -22 * h, 4 * h**2],
-        ]
-    )
-    return k, m
 
 
 def _check_elements(n_elements: Any, n_segments: int) -> int:
