@@ -47,12 +47,12 @@ never change during a fit and the collocation points only every `resample_every`
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import torch
 from torch import Tensor
 
+from .jet_cache import _JetCache
 from .taylor import Jet
 
 #: truncation: the sine series stops where g_n < this (its fourth derivative then converges to it)
@@ -83,51 +83,6 @@ def forced_amplification(
         return 1.0 / (1.0 - r2) - 1.0, None
     den = (1.0 - r2) ** 2 + (2.0 * z) ** 2 * r2
     return (1.0 - r2) / den - 1.0, -2.0 * z * r2.sqrt() / den
-
-
-def _compiling() -> bool:
-    f = getattr(torch.compiler, "is_compiling", None)  # torch >= 2.3
-    return bool(f()) if f is not None else bool(torch._dynamo.is_compiling())
-
-
-class _JetCache:
-    """The jets of the last `size` point sets, keyed by the very tensors (identity and version, so a new or
-    modified tensor is a miss). Not kept for points that carry gradients, nor while torch.compile traces;
-    not pickled (a copy starts empty)."""
-
-    def __init__(self, size: int = 8):
-        self.size = size
-        self.items: OrderedDict = OrderedDict()
-
-    @staticmethod
-    def usable(xi: Tensor, tau: Tensor) -> bool:
-        return not (xi.requires_grad or tau.requires_grad or _compiling())
-
-    def get(self, xi: Tensor, tau: Tensor, kx: int, kt: int, make) -> Jet:
-        if not self.usable(xi, tau):
-            return make()
-        key = (id(xi), id(tau), kx, kt)
-        hit = self.items.get(key)
-        # the entry holds its tensors, so their ids cannot be reused while it lives
-        if (
-            hit is not None
-            and hit[0] is xi
-            and hit[1] is tau
-            and hit[2] == (xi._version, tau._version)
-        ):
-            self.items.move_to_end(key)
-            return hit[3]
-        jet = make()
-        self.items[key] = (xi, tau, (xi._version, tau._version), jet)
-        while len(self.items) > self.size:
-            self.items.popitem(last=False)
-        return jet
-
-    def __getstate__(self) -> dict:
-        return {"size": self.size}
-
-    def __setstate__(self, state: dict) -> None:
-        self.__init__(state["size"])
 
 
 @dataclass(frozen=True)
