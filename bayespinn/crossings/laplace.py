@@ -52,10 +52,11 @@ class Conditional:
         self.shared = [i for i, n in enumerate(L.names) if "[" not in n]
         self.own = []
         for c in post.terms:
-            idx = [L.index[n] for n in (f"log_v[{c.name}]", f"t0[{c.name}]") if n in L.index]
-            mean = [math.log(c.speed)] * (c.speed_sd > 0) + [c.entry_time] * (c.entry_time_sd > 0)
-            sd = [c.speed_sd] * (c.speed_sd > 0) + [c.entry_time_sd] * (c.entry_time_sd > 0)
-            self.own.append((idx, np.array(mean, float), np.array(sd, float)))
+            own = c.own
+            idx = [L.index[n] for n, _, _ in own]
+            mean = np.array([m for _, m, _ in own], float)
+            sd = np.array([d for _, _, d in own], float)
+            self.own.append((idx, mean, sd))
         self.theta_map = np.asarray(theta_map, float)
 
     def at(self, shared: np.ndarray) -> list[dict]:
@@ -94,8 +95,7 @@ class Conditional:
 
     def _residual(self, c, theta: np.ndarray) -> np.ndarray:
         i = self.post.terms.index(c)
-        p = self.post.unpack(theta)
-        return c.y[None, :] - c.model.predict(p["EI"], p["zeta"], p["v"][i], p["t0"][i])
+        return c.y[None, :] - c.predict(self.post.unpack(theta), i)
 
 
 def crossing_loglik(parts: list[dict], own, sigma: np.ndarray, n: list[int]) -> np.ndarray:

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..uq.priors import EIPrior, NoisePrior
 from .forward import CrossingModel, basis_frequencies
+from .interaction import interaction_response
 
 #: the force time scale's prior: log-normal, median FORCE_L_MEDIAN [s], log-sd FORCE_L_LOG_SD, truncated
 #: below at FORCE_L_MIN (the spectral peak 2 / l at most 2.7 Hz there, above a lorry body's bounce)
@@ -48,9 +49,18 @@ def n_basis_for(Te: float) -> int:
     return int(min(MAX_BASIS, math.ceil(BASIS_CUTOFF * 2.0 * Lh / (math.pi * FORCE_L_MIN))))
 
 
+#: a sprung vehicle's suspension priors (log-normal around the stated values): log-sds that span lorry
+#: suspensions (bounce 1-4 Hz and damping ratios 0.03-0.3 are within their 90 % ranges about the defaults)
+BODY_FREQUENCY_LOG_SD, BODY_DAMPING_LOG_SD = 0.5, 0.7
+
+
 @dataclass
 class CrossingTerm:
-    """One crossing's share of the likelihood: its rows' values, its model and its stated vehicle."""
+    """One crossing's share of the likelihood: its rows' values, its model and its stated vehicle.
+
+    sprung: the analysis carries each axle's body on its suspension (`interaction`), whose bounce frequency
+    and damping ratio are then this crossing's own parameters about the stated body_frequency and
+    body_damping."""
 
     name: str
     rows: np.ndarray
@@ -60,6 +70,41 @@ class CrossingTerm:
     speed_sd: float
     entry_time: float
     entry_time_sd: float
+    sprung: bool = False
+    body_frequency: float = 2.5
+    body_damping: float = 0.1
+
+    @property
+    def own(self) -> list[tuple[str, float, float]]:
+        """(parameter name, prior mean, prior sd) of this crossing's own parameters, all normal on their
+        scale: log speed, entry time, and with a sprung vehicle log bounce frequency, log damping ratio."""
+        out = []
+        if self.speed_sd > 0:
+            out.append((f"log_v[{self.name}]", math.log(self.speed), self.speed_sd))
+        if self.entry_time_sd > 0:
+            out.append((f"t0[{self.name}]", self.entry_time, self.entry_time_sd))
+        if self.sprung:
+            out.append(
+                (f"log_fb[{self.name}]", math.log(self.body_frequency), BODY_FREQUENCY_LOG_SD)
+            )
+            out.append((f"log_zb[{self.name}]", math.log(self.body_damping), BODY_DAMPING_LOG_SD))
+        return out
+
+    def predict(self, p: dict, i: int) -> np.ndarray:
+        """The response without force fluctuation (W, n) for unpacked parameters p, this being crossing i."""
+        args = (p["EI"], p["zeta"], p["v"][i], p["t0"][i])
+        mu = self.model.predict(*args)
+        if self.sprung:
+            mu = mu + interaction_response(self.model, *args, p["fb"][i], p["zb"][i])
+        return mu
+
+    def responses(self, p: dict, i: int):
+        """`predict` and the force basis' responses (W, n, M)."""
+        args = (p["EI"], p["zeta"], p["v"][i], p["t0"][i])
+        mu, R = self.model.responses(*args, basis=True)
+        if self.sprung:
+            mu = mu + interaction_response(self.model, *args, p["fb"][i], p["zb"][i])
+        return mu, R
 
 
 class Layout:
@@ -72,10 +117,7 @@ class Layout:
         if forces:
             names += ["log_s", "log_l", "log_sigma"]
         for c in terms:
-            if c.speed_sd > 0:
-                names.append(f"log_v[{c.name}]")
-            if c.entry_time_sd > 0:
-                names.append(f"t0[{c.name}]")
+            names += [n for n, _, _ in c.own]
         self.names = names
         self.index = {n: i for i, n in enumerate(names)}
         self.dim = len(names)
@@ -112,6 +154,13 @@ class CrossingsLogPosterior:
             "zeta": np.exp(L.col(th, "log_zeta", math.log(max(self.zeta_known, 1e-300)))),
             "v": [np.exp(L.col(th, f"log_v[{c.name}]", math.log(c.speed))) for c in self.terms],
             "t0": [L.col(th, f"t0[{c.name}]", c.entry_time) for c in self.terms],
+            "fb": [
+                np.exp(L.col(th, f"log_fb[{c.name}]", math.log(c.body_frequency)))
+                for c in self.terms
+            ],
+            "zb": [
+                np.exp(L.col(th, f"log_zb[{c.name}]", math.log(c.body_damping))) for c in self.terms
+            ],
         }
         if self.damping_prior is None:
             out["zeta"] = np.full(th.shape[0], self.zeta_known)
@@ -141,10 +190,8 @@ class CrossingsLogPosterior:
             )
             lp = lp + self.noise_prior.logpdf(th[:, L.index["log_sigma"]])
         for c in self.terms:
-            if c.speed_sd > 0:
-                lp = lp + _normal(th[:, L.index[f"log_v[{c.name}]"]], math.log(c.speed), c.speed_sd)
-            if c.entry_time_sd > 0:
-                lp = lp + _normal(th[:, L.index[f"t0[{c.name}]"]], c.entry_time, c.entry_time_sd)
+            for name, mean, sd in c.own:
+                lp = lp + _normal(th[:, L.index[name]], mean, sd)
         return lp
 
     def residuals(self, theta: np.ndarray, *, basis: bool = False):
@@ -154,14 +201,13 @@ class CrossingsLogPosterior:
         out = []
         for i, c in enumerate(self.terms):
             if basis and self.forces:
-                mu, R = c.model.responses(p["EI"], p["zeta"], p["v"][i], p["t0"][i], basis=True)
+                mu, R = c.responses(p, i)
                 alpha, _, _ = basis_frequencies(c.model.L / p["v"][i], c.model.n_basis)
                 d = inertial_spectral_sd(alpha, p["s"], p["l"])  # (W, m), the same for every axle
                 R = R * np.tile(d, (1, c.model.loads.size))[:, None, :]
                 out.append((c.y[None, :] - mu, R))
             else:
-                mu = c.model.predict(p["EI"], p["zeta"], p["v"][i], p["t0"][i])
-                out.append((c.y[None, :] - mu, None))
+                out.append((c.y[None, :] - c.predict(p, i), None))
         return out
 
     def loglik(self, theta: np.ndarray) -> np.ndarray:

@@ -12,6 +12,8 @@ the fit check and the report's predictive draws ask for); other points are predi
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..config import Config
@@ -70,13 +72,14 @@ class CrossingsPredictor:
             c.model.L, c.model.mu, c.model.loads, c.model.offsets, x, t, a_u, a_xx,
             n_modes=max(c.model.n_modes, 24), n_basis=nb, basis_modes=c.model.basis_modes,
         )  # fmt: skip
+        view = dataclasses.replace(c, model=model)
         out = []
         for ch in np.array_split(idx, max(1, len(idx) // CHUNK)):
-            args = (p["EI"][ch], p["zeta"][ch], p["v"][i][ch], p["t0"][i][ch])
+            sub = {k: [a[ch] for a in v] if isinstance(v, list) else v[ch] for k, v in p.items()}
             if not nb:
-                out.append(model.predict(*args))
+                out.append(view.predict(sub, i))
                 continue
-            mu, R = model.responses(*args, basis=True)
+            mu, R = view.responses(sub, i)
             m = self.mean
             alpha, _, _ = basis_frequencies(c.model.L / m["v"][i], nb)
             d = np.tile(inertial_spectral_sd(alpha, m["s"], m["l"]), (1, c.model.loads.size))

@@ -25,6 +25,7 @@ from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
 from ..errors import InputError
+from ..threads import one_blas_thread
 from ..uq.posterior import Posterior, mcmc_diagnostics, summarise
 from ..uq.priors import EIPrior, NoisePrior, prior_only
 from ..uq.sampler import ESS_MIN, RHAT_MAX, MCMCSettings, sample
@@ -54,6 +55,7 @@ def needs_crossings(cfg: Config, data: Measurements | None = None) -> bool:
         several
         or cfg.model.damping == "inferred"
         or cfg.model.axle_forces == "fluctuating"
+        or any(v.model == "sprung" for v in vehicles)
         or any(v.speed_sd > 0 or v.entry_time_sd > 0 or v.entry_time != 0 for v in vehicles)
     )
 
@@ -79,6 +81,8 @@ def refuse_crossings(cfg: Config, data: Measurements | None, display: str) -> No
         (f"crossing[{i}]", c.vehicle) for i, c in enumerate(cfg.crossings)
     ]
     for where, v in vehicles:
+        if v.model == "sprung":
+            raise InputError(f"{where}.model", v.model, f"'forces' {why}")
         if v.speed_sd > 0:
             raise InputError(f"{where}.speed_sd", v.speed_sd, f"0 {why}")
         if v.entry_time_sd > 0:
@@ -183,6 +187,9 @@ def _terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[
                 veh.speed_sd,
                 veh.entry_time,
                 veh.entry_time_sd,
+                sprung=veh.model == "sprung",
+                body_frequency=veh.body_frequency,
+                body_damping=veh.body_damping,
             )  # fmt: skip
         )
     return out
@@ -265,7 +272,7 @@ def _jacobian(post: CrossingsLogPosterior, full, idx: list[int], z: np.ndarray, 
         need = [k for k, n in enumerate(names) if "[" not in n or n.endswith(f"[{c.name}]")]
         sel = np.ravel([[2 * k, 2 * k + 1] for k in need])
         p = post.unpack(th[sel])
-        mu = c.model.predict(p["EI"], p["zeta"], p["v"][ci], p["t0"][ci])
+        mu = c.predict(p, ci)
         J[row : row + c.y.size, need] = (-(mu[0::2] - mu[1::2]) / (2 * h[need, None] * sigma)).T
         row += c.y.size
     return J
@@ -279,10 +286,7 @@ def _prior_residuals(post: CrossingsLogPosterior, th: np.ndarray) -> np.ndarray:
         med, sd = post.damping_prior
         out.append((th[L.index["log_zeta"]] - math.log(med)) / sd)
     for c in post.terms:
-        if f"log_v[{c.name}]" in L.index:
-            out.append((th[L.index[f"log_v[{c.name}]"]] - math.log(c.speed)) / c.speed_sd)
-        if f"t0[{c.name}]" in L.index:
-            out.append((th[L.index[f"t0[{c.name}]"]] - c.entry_time) / c.entry_time_sd)
+        out += [(th[L.index[name]] - mean) / sd for name, mean, sd in c.own]
     return np.array(out)
 
 
@@ -384,6 +388,7 @@ def _choose_modes(cfg, data, post_of, th, sigma, start: int = 8, cap: int = 64):
         n *= 2
 
 
+@one_blas_thread
 def crossings_reference(
     data: Measurements,
     cfg: Config,
@@ -430,40 +435,67 @@ def crossings_reference(
     rss = sum(float(np.sum(r**2)) for r, _ in post.residuals(th[None]))
     sigma = math.sqrt(rss / post.n)
     L = post.layout
-    if forces:  # the fluctuation's parameters from the priors' medians, then the whole maximum
+    if forces:  # the fluctuation's parameters start from the priors' medians
         th[L.index["log_s"]] = math.log(0.5 * 0.05)
         th[L.index["log_l"]] = math.log(FORCE_L_MEDIAN)
         th[L.index["log_sigma"]] = math.log(sigma)
-        res = minimize(
-            lambda z: -float(post(z[None])[0]), th, method="Nelder-Mead",
-            options={"maxiter": 150 * L.dim, "xatol": 1e-6, "fatol": 1e-3},
-        )  # fmt: skip
-        if np.isfinite(res.fun) and res.fun < -float(post(th[None])[0]):
-            th = res.x
     h = np.array([_step(n, post) for n in L.names])
     if laplace is None:
-        laplace = len(post.terms) > 1
-    laplace = bool(laplace) and not forces
-    if laplace:  # each crossing's speed and entry time by Laplace inside the shared likelihood
+        kind = "linearised" if forces else ("laplace" if len(post.terms) > 1 else "emcee")
+    else:
+        kind = ("linearised" if forces else "laplace") if laplace else "emcee"
+    extra: dict = {}
+    if (
+        kind == "laplace"
+    ):  # each crossing's speed and entry time by Laplace inside the shared likelihood
         from .laplace import laplace_sample
 
         flat, sig, ch, extra = laplace_sample(post, th, h, sigma, s, seed, progress)
         shape = sig.shape
         draws = flat.reshape(*shape, L.dim)
+    elif (
+        kind == "linearised"
+    ):  # the nonlinear parameters linearised, forces and theta integrated out
+        from .linearised import linearised_sample
+
+        flat, ch, lin, extra = linearised_sample(post, th, s, seed, progress)
+        shape = ch.draws.shape[:2]
+        draws = flat.reshape(*shape, L.dim)
+        th = lin.theta.copy()
+        chk = extra["linearisation"]["importance_check"]
+        if not chk["passed"]:
+            warnings.warn(
+                "the crossing posterior's linearisation does not pass its importance check "
+                f"({chk['criterion']}: ESS {chk['ess_fraction']:.2f} x draws, log EI shift "
+                f"{chk['log_EI_shift_sd']:+.2f} sd)", RuntimeWarning, stacklevel=2,
+            )  # fmt: skip
     else:
+        if forces:  # the whole maximum under the exact likelihood
+            res = minimize(
+                lambda z: -float(post(z[None])[0]), th, method="Nelder-Mead",
+                options={"maxiter": 150 * L.dim, "xatol": 1e-6, "fatol": 1e-3},
+            )  # fmt: skip
+            if np.isfinite(res.fun) and res.fun < -float(post(th[None])[0]):
+                th = res.x
         scale = _hessian_scale(post, th, h)
         s = dataclasses.replace(s, n_walkers=max(s.n_walkers, 2 * L.dim + 2))
         ch = sample(post, th, scale, s, seed, progress, desc="crossing MCMC")
         draws = ch.draws  # (chain, draw, D)
         flat = draws.reshape(-1, L.dim)
         shape = draws.shape[:2]
-        extra = {}
     par = post.unpack(flat)
     EI = par["EI"].reshape(shape)
-    if laplace:
+    if kind == "laplace":
         scheme = (
             "emcee on the shared parameters and sigma; each crossing's speed and entry time integrated "
             "out by Laplace (tabulated in the shared parameters), then drawn from its Laplace Gaussian"
+        )
+    elif kind == "linearised":
+        sig = par["sigma"].reshape(shape)
+        scheme = (
+            "emcee on the force fluctuation's scale, time scale and sigma; the axle-force fluctuations and "
+            "the other parameters, linearised about their conditional mean, integrated out exactly and "
+            "drawn from their Gaussian conditional; the linearisation checked by importance weights"
         )
     elif forces:
         sig = par["sigma"].reshape(shape)
@@ -491,6 +523,9 @@ def crossings_reference(
             e["speed"] = par["v"][i].reshape(shape)
         if c.entry_time_sd > 0:
             e["entry_time"] = par["t0"][i].reshape(shape)
+        if c.sprung:
+            e["body_frequency"] = par["fb"][i].reshape(shape)
+            e["body_damping"] = par["zb"][i].reshape(shape)
         nuisance["crossings"][c.name] = e
     diag = {}
     for n in L.names:
@@ -545,4 +580,6 @@ def _step(name: str, post: CrossingsLogPosterior) -> float:
         return 1e-4
     if name.startswith("log_v["):
         return 1e-5
+    if name.startswith(("log_fb[", "log_zb[")):
+        return 1e-2
     return {"log_EI": 1e-4, "log_zeta": 1e-2, "log_s": 1e-2, "log_l": 1e-2, "log_sigma": 1e-3}[name]

@@ -65,6 +65,19 @@ def _group_chain(chain: np.ndarray) -> np.ndarray:
     return np.transpose(chain, (1, 0, 2)).reshape(-1, chain.shape[-1])
 
 
+def _inside(log_prob, center: np.ndarray, p0: np.ndarray, tries: int = 20) -> np.ndarray:
+    """Walkers of the initial cloud outside the density's support (at a bound, such as a truncated prior,
+    where the maximum may sit) pulled halfway to the center until they are inside: emcee cannot move a
+    walker whose density and proposal are both zero."""
+    p0 = p0.copy()
+    for _ in range(tries):
+        bad = ~np.isfinite(np.asarray(log_prob(p0), float))
+        if not bad.any():
+            break
+        p0[bad] = center[None, :] + 0.5 * (p0[bad] - center[None, :])
+    return p0
+
+
 def sample(
     log_prob: Callable[[np.ndarray], np.ndarray],
     center: np.ndarray,
@@ -85,6 +98,7 @@ def sample(
     for g in range(s.n_groups):
         r = np.random.default_rng(seeding.child(seed, "emcee", g))
         p0 = center[None, :] + s.dispersion * scale[None, :] * r.standard_normal((s.n_walkers, dim))
+        p0 = _inside(log_prob, center, p0)
         sampler = emcee.EnsembleSampler(s.n_walkers, dim, log_prob, vectorize=True)
         rs = np.random.RandomState(seeding.int_seed(seeding.child(seed, "emcee", 1000 + g)) % 2**32)
         sampler.random_state = rs.get_state()
