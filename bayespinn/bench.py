@@ -84,7 +84,8 @@ def bench(device: str = "cpu", progress: bool = True, run: bool = False) -> dict
     (`bench_run`, minutes)."""
     import torch
 
-    from .pinn.bench import bench_derivatives, bench_ensemble, bench_many_networks
+    from .pinn.bench import bench_derivatives, bench_ensemble
+    from .pinn.bench_networks import bench_many_networks
 
     threads = torch.get_num_threads()
     res = {"schema": "bayespinn.bench/1", "device": device, "threads": threads}

@@ -34,7 +34,7 @@ if [ -z "${SKIP_MANY:-}" ]; then
 echo "== many_networks"
 timeout 90 python3 - "$OUT/many_networks.json" <<'EOF'
 import json, sys
-from bayespinn.pinn.bench import bench_many_networks
+from bayespinn.pinn.bench_networks import bench_many_networks
 res = bench_many_networks(device="cuda")
 json.dump(res, open(sys.argv[1], "w"), indent=2)
 for r in res["rows"]:

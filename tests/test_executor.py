@@ -236,7 +236,7 @@ def test_bench_ensemble_reports_what_the_toolkit_uses():
 
 
 def test_bench_many_networks_counts_networks_times_steps():
-    from bayespinn.pinn.bench import bench_many_networks
+    from bayespinn.pinn.bench_networks import bench_many_networks
 
     r = bench_many_networks(counts=(1, 3), points=30, width=8, depth=2, seconds=0.0, min_steps=2)
     one, three = r["rows"]

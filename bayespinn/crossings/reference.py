@@ -24,11 +24,18 @@ from scipy.optimize import least_squares, minimize
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
-from ..errors import InputError
+from ..methods.reference import REFERENCE_KEY
 from ..threads import one_blas_thread
 from ..uq.posterior import Posterior, mcmc_diagnostics, summarise
 from ..uq.priors import EIPrior, NoisePrior, prior_only
 from ..uq.sampler import ESS_MIN, RHAT_MAX, MCMCSettings, sample
+from .checks import (  # noqa: F401  (re-exported: the package's names)
+    check_crossings,
+    check_ei_field,
+    needs_crossings,
+    refuse_crossings,
+    split_crossings,
+)
 from .forward import CrossingModel
 from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_basis_for
 
@@ -41,130 +48,6 @@ TRUNCATION_FRACTION = 0.01
 BASIS_MODES = 1
 #: modes carried by the predictor (reports, fit check)
 PREDICT_MODES = 24
-
-
-def needs_crossings(cfg: Config, data: Measurements | None = None) -> bool:
-    """Whether the analysis declares anything the crossing reference infers or today's reference cannot
-    read: a speed or entry-time sd, an entry time other than 0, inferred damping, fluctuating axle forces,
-    [[crossing]] tables, or a crossing column with several names."""
-    vehicles = [cfg.vehicle] + [c.vehicle for c in cfg.crossings]
-    several = bool(cfg.crossings) or (
-        data is not None and data.crossing is not None and len(set(data.crossing)) > 1
-    )
-    return (
-        several
-        or cfg.model.damping == "inferred"
-        or cfg.model.axle_forces == "fluctuating"
-        or any(v.model == "sprung" for v in vehicles)
-        or any(v.speed_sd > 0 or v.entry_time_sd > 0 or v.entry_time != 0 for v in vehicles)
-    )
-
-
-def check_ei_field(cfg: Config) -> None:
-    """`model.EI_field = "smooth"` is not built yet: refused by every method, one line."""
-    if cfg.model.EI_field != "segments":
-        raise InputError(
-            "model.EI_field",
-            cfg.model.EI_field,
-            "'segments' (a smooth EI field is not supported yet)",
-        )
-
-
-def refuse_crossings(cfg: Config, data: Measurements | None, display: str) -> None:
-    """For a method that takes the crossing as stated (the PINN methods): InputError naming the first key
-    that declares something to infer, rather than silently analysing with the stated values."""
-    check_ei_field(cfg)
-    if not needs_crossings(cfg, data):
-        return
-    why = f"for {display}, which takes the crossing as stated; --method modal infers it"
-    vehicles = [("vehicle", cfg.vehicle)] + [
-        (f"crossing[{i}]", c.vehicle) for i, c in enumerate(cfg.crossings)
-    ]
-    for where, v in vehicles:
-        if v.model == "sprung":
-            raise InputError(f"{where}.model", v.model, f"'forces' {why}")
-        if v.speed_sd > 0:
-            raise InputError(f"{where}.speed_sd", v.speed_sd, f"0 {why}")
-        if v.entry_time_sd > 0:
-            raise InputError(f"{where}.entry_time_sd", v.entry_time_sd, f"0 {why}")
-        if v.entry_time != 0:
-            raise InputError(
-                f"{where}.entry_time", v.entry_time, f"0 (the first axle entering at t = 0) {why}"
-            )
-    if cfg.model.damping != "known":
-        raise InputError("model.damping", cfg.model.damping, f"'known' {why}")
-    if cfg.model.axle_forces != "constant":
-        raise InputError("model.axle_forces", cfg.model.axle_forces, f"'constant' {why}")
-    raise InputError(
-        "[[crossing]]", len(cfg.crossings) or "a crossing column", f"one crossing {why}"
-    )
-
-
-def check_crossings(cfg: Config, data: Measurements) -> None:
-    """Refuse what the crossing reference does not describe yet, one line naming the key."""
-    m = cfg.model
-    why = "with a speed, entry time, damping or axle forces to infer, or several crossings, yet"
-    if m.EI_segments != 1:
-        raise InputError(
-            "model.EI_segments", m.EI_segments, f"1 (EI per segment is not supported {why})"
-        )
-    if m.supports != "pinned":
-        raise InputError(
-            "model.supports", m.supports, f"'pinned' (springs are not supported {why})"
-        )
-    if m.noise != "iid":
-        raise InputError("model.noise", m.noise, f"'iid' (AR(1) noise is not supported {why})")
-    if m.EI_field != "segments":
-        raise InputError(
-            "model.EI_field", m.EI_field, f"'segments' (a smooth EI field is not supported {why})"
-        )
-    if cfg.infers_load_factor or any(c.vehicle.load_rel_sd > 0 for c in cfg.crossings):
-        raise InputError(
-            "vehicle.load_rel_sd",
-            cfg.vehicle.load_rel_sd,
-            f"0 (an uncertain load factor is not supported {why})",
-        )
-    if not cfg.beam.ideal:
-        raise InputError("beam.EI", list(cfg.beam.segments), f"one EI and pinned supports {why}")
-    split_crossings(cfg, data)
-
-
-def split_crossings(cfg: Config, data: Measurements) -> list[tuple[str, np.ndarray, object]]:
-    """(name, row indices, vehicle) per crossing: the [[crossing]] tables matched to the data's `crossing`
-    column, or the whole file as one crossing of [vehicle]."""
-    col = data.crossing
-    if not cfg.crossings:
-        if col is not None and len(set(col)) > 1:
-            raise InputError(
-                "[[crossing]]",
-                "none",
-                f"a table per crossing in the data ({', '.join(data.crossing_names)})",
-            )
-        name = str(col[0]) if col is not None and len(col) else "crossing"
-        return [(name, np.arange(len(data)), cfg.vehicle)]
-    if col is None:
-        if len(cfg.crossings) == 1:
-            return [(cfg.crossings[0].name, np.arange(len(data)), cfg.crossings[0].vehicle)]
-        raise InputError(
-            "data crossing column",
-            "missing",
-            "a crossing name per row for several [[crossing]] tables",
-        )
-    names = {c.name for c in cfg.crossings}
-    unknown = sorted(set(map(str, col)) - names)
-    if unknown:
-        raise InputError(
-            "data crossing column",
-            unknown[0],
-            "one of the [[crossing]] names " + ", ".join(sorted(names)),
-        )
-    out = []
-    for c in cfg.crossings:
-        rows = np.flatnonzero(col == c.name)
-        if rows.size == 0:
-            raise InputError(f"[[crossing]] {c.name}", c.name, "a crossing with rows in the data")
-        out.append((c.name, rows, c.vehicle))
-    return out
 
 
 def _terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[CrossingTerm]:
@@ -554,7 +437,7 @@ def crossings_reference(
     info = {"map": {n: float(v) for n, v in zip(L.names, th, strict=True)}}
     predictor = CrossingsPredictor(cfg, data, post, flat, mean_th)
     out = CrossingsReference(
-        "modal_mcmc", EI, sig, diagnostics=diag, info=info, predictor=predictor,
+        REFERENCE_KEY, EI, sig, diagnostics=diag, info=info, predictor=predictor,
         sample_stats={"lp": ch.lp, "acceptance": ch.walker_acceptance},
         nuisance=nuisance, crossing_names=tuple(c.name for c in post.terms),
     )  # fmt: skip
