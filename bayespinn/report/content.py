@@ -7,6 +7,7 @@ import numpy as np
 from ..config import Config, snr_label
 from ..uq.agreement import MEAN_TOL_SD, SD_RATIO_RANGE, agreement, caveats
 from .appendix import data_section, diagnostics_section, manifest_section, runtime_section
+from .crossings import nuisance_section
 from .document import Alert, Block, BulletList, Figure, Heading, Paragraph, table
 from .figures import FigureFile
 from .table5 import HEADER as T5_HEADER
@@ -429,6 +430,7 @@ def run_document(
     blocks += ei_table(s)
     blocks += girder_section(result)
     blocks += sigma_table(s)
+    blocks += nuisance_section(s)
     blocks += comparison_section(s)
     blocks += figures_section(list(figures), list(figure_notes))
     blocks += diagnostics_section(s)
