@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from .curvature import curvature_sds
 from .likelihood import CrossingsLogPosterior
 
 #: the table spans the maximum +- WINDOW Laplace sds of each shared parameter
@@ -181,33 +182,16 @@ def build_table(
 def marginal_scale(cond: Conditional, post, center, h, sigma: float, n_list) -> np.ndarray:
     """Laplace sds of the shared parameters from the curvature of their Laplace-marginal log posterior at
     sigma (central differences with steps h, a handful of conditional fits)."""
-    S = center.size
-    pts = [center]
-    for i in range(S):
-        for j in range(i, S):
-            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                p = center.copy()
-                p[i] += si * h[i]
-                p[j] += sj * h[j]
-                pts.append(p)
-    pts = np.array(pts)
-    full = np.repeat(cond.theta_map[None], len(pts), 0)
-    full[:, cond.shared] = pts
-    sig = np.full(len(pts), sigma)
-    f = -(_shared_prior(post, full) + crossing_loglik(cond.at(pts), cond.own, sig, n_list))
-    H = np.zeros((S, S))
-    k = 1
-    for i in range(S):
-        for j in range(i, S):
-            fpp, fpm, fmp, fmm = f[k : k + 4]
-            k += 4
-            H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
-    try:
-        sd = np.sqrt(np.diag(np.linalg.inv(H)))
-        if np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0):
-            return sd
-    except np.linalg.LinAlgError:
-        pass
+
+    def neg_logp(pts: np.ndarray) -> np.ndarray:
+        full = np.repeat(cond.theta_map[None], len(pts), 0)
+        full[:, cond.shared] = pts
+        sig = np.full(len(pts), sigma)
+        return -(_shared_prior(post, full) + crossing_loglik(cond.at(pts), cond.own, sig, n_list))
+
+    sd = curvature_sds(neg_logp, center, h)
+    if sd is not None:
+        return sd
     return 10 * np.asarray(h, float)
 
 

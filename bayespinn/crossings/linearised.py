@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .curvature import curvature_sds
 from .forward import basis_frequencies
 from .likelihood import (
     BODY_DAMPING_LOG_SD,
@@ -450,28 +451,9 @@ def _conditional_sd(lin: Linearisation, h: np.ndarray) -> np.ndarray:
 
 
 def _hyper_scale(lin: Linearisation, h: np.ndarray) -> np.ndarray:
-    """sds of h from the curvature of its log posterior at the maximum (central differences)."""
+    """sds of h from the curvature of its log posterior at the maximum (`curvature.curvature_sds`)."""
     step = np.array([1e-2, 1e-2, 1e-3] + [1e-2] * (h.size - 3))
-    D = h.size
-    pts = [h]
-    for i in range(D):
-        for j in range(i, D):
-            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                p = h.copy()
-                p[i] += si * step[i]
-                p[j] += sj * step[j]
-                pts.append(p)
-    f = -log_hyper_posterior(lin, np.array(pts))
-    H = np.zeros((D, D))
-    k = 1
-    for i in range(D):
-        for j in range(i, D):
-            fpp, fpm, fmp, fmm = f[k : k + 4]
-            k += 4
-            H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * step[i] * step[j])
-    try:
-        if np.all(np.isfinite(H)) and np.all(np.linalg.eigvalsh(H) > 0):
-            return np.sqrt(np.diag(np.linalg.inv(H)))
-    except np.linalg.LinAlgError:
-        pass
+    sd = curvature_sds(lambda p: -log_hyper_posterior(lin, p), h, step)
+    if sd is not None:
+        return sd
     return np.array([0.3, 0.3, 1.0 / math.sqrt(2 * lin.n)] + [0.1] * (h.size - 3))

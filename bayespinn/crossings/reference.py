@@ -36,6 +36,7 @@ from .checks import (  # noqa: F401  (re-exported: the package's names)
     refuse_crossings,
     split_crossings,
 )
+from .curvature import curvature_sds
 from .forward import CrossingModel
 from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_basis_for
 
@@ -174,33 +175,10 @@ def _prior_residuals(post: CrossingsLogPosterior, th: np.ndarray) -> np.ndarray:
 
 
 def _hessian_scale(post: CrossingsLogPosterior, th: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Laplace sds of the parameters at the maximum: sqrt of the diagonal of the inverse finite-difference
-    Hessian of -log p (all points in one vectorised call); the steps h where that is not positive definite."""
-    D = th.size
-    pts = [th]
-    for i in range(D):
-        for j in range(i, D):
-            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-                p = th.copy()
-                p[i] += si * h[i]
-                p[j] += sj * h[j]
-                pts.append(p)
-    f = -post(np.array(pts))
-    H = np.zeros((D, D))
-    k = 1
-    for i in range(D):
-        for j in range(i, D):
-            fpp, fpm, fmp, fmm = f[k : k + 4]
-            k += 4
-            H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
-    try:
-        cov = np.linalg.inv(H)
-        sd = np.sqrt(np.diag(cov))
-        if np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0):
-            return sd
-    except np.linalg.LinAlgError:
-        pass
-    return h
+    """Laplace sds of the parameters at the maximum (`curvature.curvature_sds` of -log p); the steps h
+    where the Hessian is not positive definite."""
+    sd = curvature_sds(lambda p: -post(p), th, h)
+    return h if sd is None else sd
 
 
 @dataclass
