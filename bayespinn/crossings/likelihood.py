@@ -245,6 +245,11 @@ class CrossingsLogPosterior:
         return out
 
 
+def rows_of(p: dict, idx) -> dict:
+    """Unpacked parameters p (`CrossingsLogPosterior.unpack`) for some of their rows (a slice or indices)."""
+    return {k: [a[idx] for a in v] if isinstance(v, list) else v[idx] for k, v in p.items()}
+
+
 def woodbury_loglik(r: np.ndarray, B: np.ndarray, sig2: np.ndarray) -> np.ndarray:
     """-(1/2) [log det(I + B'B / sigma^2) + r'(sigma^2 I + B B')^(-1) r], r (W, n), B (W, n, M), sigma^2
     (W,), without the n log(2 pi sigma^2) / 2 that the caller adds."""

@@ -37,6 +37,7 @@ from .likelihood import (
     BODY_FREQUENCY_LOG_SD,
     CrossingsLogPosterior,
     inertial_spectral_sd,
+    rows_of,
     woodbury_loglik,
 )
 
@@ -101,11 +102,6 @@ def _cheb2(u: np.ndarray, K: int) -> np.ndarray:
     return (a[:, :, None] * b[:, None, :]).reshape(u.shape[0], K * K)
 
 
-def _rows(p: dict, sl: slice) -> dict:
-    """The unpacked parameters p for a slice of their rows."""
-    return {k: [a[sl] for a in v] if isinstance(v, list) else v[sl] for k, v in p.items()}
-
-
 class Linearisation:
     """The linear Gaussian model at theta* (module docstring), its evidence and conditionals."""
 
@@ -148,7 +144,7 @@ class Linearisation:
             pts[1 + 2 * j, k] += h[j]
             pts[2 + 2 * j, k] -= h[j]
         p = self.post.unpack(pts)
-        first, rest = _rows(p, slice(0, 1)), _rows(p, slice(1, None))
+        first, rest = rows_of(p, slice(0, 1)), rows_of(p, slice(1, None))
         mu = c.predict(rest, i)
         J = (mu[0::2] - mu[1::2]) / (2 * h[:, None])  # (k, n)
         mu0, R = c.responses(first, i)

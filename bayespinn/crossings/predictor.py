@@ -22,7 +22,7 @@ from ..physics.loads import quantity_weights
 from ..uq import fitcheck
 from ..uq.posterior import Posterior
 from .forward import CrossingModel, basis_frequencies
-from .likelihood import CrossingsLogPosterior, inertial_spectral_sd
+from .likelihood import CrossingsLogPosterior, inertial_spectral_sd, rows_of
 
 #: walkers per vectorised call of the forward model
 CHUNK = 16
@@ -75,7 +75,7 @@ class CrossingsPredictor:
         view = dataclasses.replace(c, model=model)
         out = []
         for ch in np.array_split(idx, max(1, len(idx) // CHUNK)):
-            sub = {k: [a[ch] for a in v] if isinstance(v, list) else v[ch] for k, v in p.items()}
+            sub = rows_of(p, ch)
             if not nb:
                 out.append(view.predict(sub, i))
                 continue
