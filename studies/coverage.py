@@ -29,7 +29,7 @@ from pathlib import Path
 import common as c
 import numpy as np
 
-from bayespinn.config import preset, snr_label
+from bayespinn.config import CASES, preset, resolve, snr_label
 from bayespinn.errors import InputError
 from bayespinn.executor import Executor
 from bayespinn.provenance import commits, commits_text
@@ -154,9 +154,18 @@ def blocks(doc: dict) -> list:
             )
         )
     out = [
-        Heading("Coverage of the true EI by the credible intervals", 1),
+        Heading(
+            "Coverage of the true EI by the credible intervals"
+            + (f": {doc['config']}, {doc['case']} case" if doc.get("config") else ""),
+            1,
+        ),
         Paragraph(
-            "Deflection case (case study 1). For each method and SNR: synthetic datasets (fresh random sample "
+            (
+                f"The girder and analysis model of `{doc['config']}`, {doc['case']} case. "
+                if doc.get("config")
+                else "Deflection case (case study 1). "
+            )
+            + "For each method and SNR: synthetic datasets (fresh random sample "
             "points and noise per replicate, the true EI fixed); 'hits': replicates whose central interval "
             "contains the true EI. A calibrated method's hits follow Binomial(n, level); the acceptance region "
             f"holds them with probability {100 * (1 - FALSE_FAILURE):.0f} %, and the verdict says whether the "
@@ -217,20 +226,78 @@ def blocks(doc: dict) -> list:
             )
         )
     out += paired_blocks(doc)
+    out += coefficient_blocks(doc)
     out += c.not_run_yet(doc)
     out += [
         Heading("Files"),
         BulletList(
             (
-                "`coverage.json`: these rows (SI units);",
-                "`coverage/<method>-snr<S>.json`: each study in the `bayespinn coverage` schema, with the "
-                "per-replicate records (interval, rank, relative error).",
+                f"`{page_name(doc)}.json`: these rows (SI units);",
+                f"`coverage/{study_prefix(doc)}<method>-snr<S>.json`: each study in the `bayespinn "
+                "coverage` schema, with the per-replicate records (interval, rank, relative error).",
             )
         ),
         Heading("Provenance"),
         BulletList(tuple(c.provenance_lines(doc["runs"], list(doc["runs"])))),
     ]
     return out
+
+
+def page_name(doc: dict) -> str:
+    """The table's file stem: `coverage` for the Exeter deflection study, else with the config and case."""
+    return "coverage" + (f"-{Path(doc['config']).stem}-{doc['case']}" if doc.get("config") else "")
+
+
+def study_prefix(doc: dict) -> str:
+    return f"{Path(doc['config']).stem}-{doc['case']}-" if doc.get("config") else ""
+
+
+def coefficient_blocks(doc: dict) -> list:
+    """The AR(1) coefficient's coverage, for rows whose analysis inferred it."""
+    rows = [r for r in doc["rows"] if r.get("noise_ar1")]
+    if not rows:
+        return []
+    body = []
+    for r in rows:
+        q = r["noise_ar1"]
+        lo, hi = q["acceptance_99"]
+        ok = lo <= q["hits"] <= hi
+        body.append(
+            (
+                name(r["method"]),
+                c.snr_text(r["snr_db"]),
+                f"{q['true']:g}",
+                str(q["replicates"]),
+                str(q["hits"]),
+                f"[{lo}, {hi}]",
+                q["verdict"] if ok else f"**{q['verdict']}**",
+                "n/a" if q["rank_uniformity_p"] is None else f"{q['rank_uniformity_p']:.3f}",
+                f"{q['mean']:.3f}",
+                f"{q['mean_sd']:.3f}",
+            )
+        )
+    return [
+        Heading("Coverage of the noise's AR(1) coefficient"),
+        Paragraph(
+            "The same replicates: the analysis infers the coefficient of the AR(1) noise beside EI; hits: "
+            "replicates whose central interval holds the coefficient the data were simulated with."
+        ),
+        table(
+            (
+                "method",
+                "SNR",
+                "true coefficient",
+                "replicates",
+                "hits",
+                "99 % acceptance (hits)",
+                "verdict",
+                "rank-uniformity p",
+                "mean of means",
+                "mean sd",
+            ),
+            body,
+        ),
+    ]
 
 
 def add_paired(doc: dict, out: Path) -> None:
@@ -342,7 +409,9 @@ def rank_figure(doc: dict, out: Path) -> str | None:
     if not studies:
         return None
     label = lambda r: f"{name(r['method'])}, {c.snr_text(r['snr_db'])}"  # noqa: E731
-    path = rank_ecdf_figure(studies, out / "coverage_ranks.png", ECDF_BAND, FALSE_FAILURE, label)
+    path = rank_ecdf_figure(
+        studies, out / f"{page_name(doc)}_ranks.png", ECDF_BAND, FALSE_FAILURE, label
+    )
     return path.name
 
 
@@ -359,17 +428,18 @@ def refresh(doc: dict, out: Path, figure: bool = True) -> None:
         r["power_against"] = POWER_AGAINST
     if figure:
         doc["rank_figure"] = rank_figure(doc, out)
-    elif (out / "coverage_ranks.png").exists():
-        doc["rank_figure"] = "coverage_ranks.png"
+    elif (out / f"{page_name(doc)}_ranks.png").exists():
+        doc["rank_figure"] = f"{page_name(doc)}_ranks.png"
 
 
 def write_page(doc: dict, out: Path) -> None:
     """coverage.json, coverage.md and the rank figure of the table doc, with the paired comparisons and each
     row's verdict, power and commits brought up to date."""
     refresh(doc, out)
-    c.write_json(out / "coverage.json", doc)
-    c.write_markdown(out / "coverage.md", blocks(doc))
-    log.info("wrote %s and %s", out / "coverage.md", out / "coverage.json")
+    stem = page_name(doc)
+    c.write_json(out / f"{stem}.json", doc)
+    c.write_markdown(out / f"{stem}.md", blocks(doc))
+    log.info("wrote %s and %s", out / f"{stem}.md", out / f"{stem}.json")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -382,6 +452,13 @@ def main(argv: list[str] | None = None) -> int:
         help="N for every method, or method=N pairs (default modal=200, ensemble=30, bpinn=20)",
     )
     p.add_argument("--level", type=float, default=0.9, help="credible level (default 0.9)")
+    p.add_argument(
+        "--config",
+        default=None,
+        help="a TOML of the truth and the analysis model (default: the Exeter girder); its study goes to "
+        "coverage-<name>-<case>.md/json",
+    )
+    p.add_argument("--case", default="deflection", help="deflection (default) or strain")
     p.add_argument(
         "--workers", type=int, default=None, help="local worker processes (default one per core)"
     )
@@ -399,8 +476,13 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(argv)
     c.setup_logging(args.quiet)
     out = Path(args.out)
+    if args.case not in CASES:
+        raise InputError("--case", args.case, "one of " + ", ".join(CASES))
+    # the Exeter deflection study keeps its page, coverage.md; any other girder or case gets its own
+    custom = args.config or args.case != "deflection"
+    which = {"config": args.config or "exeter", "case": args.case} if custom else {}
     if args.report_only:
-        doc = c.load_table(out / "coverage.json", SCHEMA)
+        doc = c.load_table(out / f"{page_name(which)}.json", SCHEMA)
         if not doc["rows"]:
             raise InputError(
                 "--out", str(out), "a folder with a coverage.json from an earlier study"
@@ -414,7 +496,7 @@ def main(argv: list[str] | None = None) -> int:
     if not 0.0 < args.level < 1.0:
         raise InputError("--level", args.level, "a credible level in (0, 1)")
     reps = replicates_of(args.replicates, methods)
-    cfg = preset("deflection")
+    cfg = resolve(args.case, args.config) if args.config else preset(args.case)
     keys = [c.key_of(m) for m in methods]
     executor = Executor("local", args.workers)
     prov = c.provenance(
@@ -430,7 +512,7 @@ def main(argv: list[str] | None = None) -> int:
         for snr in levels:
             log.info("coverage: %s at %s dB, %d replicates", key, snr_label(snr), reps[m])
             # finished replicates survive an interruption; the same command resumes from them
-            study = out / "coverage" / f"{key}-snr{snr_label(snr)}.json"
+            study = out / "coverage" / f"{study_prefix(which)}{key}-snr{snr_label(snr)}.json"
             partial = study.with_name(study.name + ".partial.jsonl")
             res = coverage_study(
                 m,
@@ -451,10 +533,13 @@ def main(argv: list[str] | None = None) -> int:
             row["acceptance_99"] = list(
                 binomial_acceptance(res["replicates"], args.level, FALSE_FAILURE)
             )
-            row["file"] = f"coverage/{key}-snr{snr_label(snr)}.json"
+            row["file"] = str(study.relative_to(out))
             # merged at once: a run stopped in a later level keeps this level's row
-            doc = c.load_table(out / "coverage.json", SCHEMA)
-            doc.update(case="deflection", truth={"EI": cfg.beam.EI})
+            doc = c.load_table(out / f"{page_name(which)}.json", SCHEMA)
+            doc.update(case=cfg.case, truth={"EI": cfg.beam.EI})
+            doc.update(which)
+            if cfg.model.noise == "ar1":
+                doc["truth"]["noise_ar1"] = cfg.data.noise_ar1
             c.merge(doc, [row], prov, ("snr_db", "method"), sort_key)
             write_page(doc, out)
             log.info(

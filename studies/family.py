@@ -45,6 +45,27 @@ SCHEMA = "bayespinn.studies.family/1"
 #: the timing yardstick: the Exeter girder's run at 20 dB, seed 11 (deflection)
 TIME_REFERENCE = {"case": "deflection", "snr_db": 20.0, "seed": 11}
 TIME_RATIO_MAX = 2.0
+#: seed 0 is the development family: the tied vibrations, the pooling and the bands were built and re-run on it
+DEVELOPMENT_SEED = 0
+#: the held-out family, drawn once (`secrets.randbelow(2**31)`) and never used to choose anything: what every
+#: claim about unseen bridges rests on
+HELD_OUT_SEED = 393247754
+
+
+def family_name(seed: int) -> str:
+    if seed == DEVELOPMENT_SEED:
+        return "development family"
+    if seed == HELD_OUT_SEED:
+        return "held-out family"
+    return f"family of seed {seed}"
+
+
+def study_stem(case: str, snr: float, seed: int) -> str:
+    """The study file's name: the development family's keep their names, other families' are prefixed."""
+    stem = f"{case}-snr{snr_label(snr)}"
+    if seed == DEVELOPMENT_SEED:
+        return stem
+    return ("heldout-" if seed == HELD_OUT_SEED else f"seed{seed}-") + stem
 
 
 def fingerprint(args, snr, methods_run: list[str]) -> str:
@@ -105,7 +126,7 @@ def run_time_reference(args, opts, names) -> dict:
 
 def study(args, argv, snr, names) -> dict:
     keys = [methods.get(n).key for n in names]
-    path = Path(args.out) / "family" / f"{args.case}-snr{snr_label(snr)}.json"
+    path = Path(args.out) / "family" / f"{study_stem(args.case, snr, args.family_seed)}.json"
     key = fingerprint(args, snr, names)
     doc = load_study(path, key)
     have = {r["bridge"]["index"]: r for r in doc["records"]}
@@ -251,7 +272,8 @@ def blocks(page: dict) -> list:
         out.append(
             Heading(
                 f"{s['case']}, {c.snr_text(s['snr_db'])}: {len(s['records'])} bridges "
-                f"(family seed {s['family_seed']}, data seed {s['seed']}, profile {s['profile']})",
+                f"({family_name(s['family_seed'])}: family seed {s['family_seed']}, data seed {s['seed']}, "
+                f"profile {s['profile']})",
                 2,
             )
         )
@@ -399,7 +421,8 @@ def main(argv: list[str] | None = None) -> int:
         dest="family_seed",
         type=int_at_least("--family-seed", 0),
         default=0,
-        help="which family (default 0); bridge i of a family seed is always the same bridge",
+        help=f"which family (default 0, the development family; {HELD_OUT_SEED}: the held-out family); "
+        "bridge i of a family seed is always the same bridge",
     )
     p.add_argument("--snr", default="30", help="SNR in dB (default 30)")
     p.add_argument("--case", default="deflection", help="deflection (default) or strain")

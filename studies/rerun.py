@@ -45,28 +45,35 @@ def _load(rel: str) -> dict:
 
 
 def _coverage_jobs() -> list[Job]:
-    """One per row of the coverage table, at its replicate count, started afresh (no --resume)."""
-    out = []
-    for row in _load(f"{PAPER}/coverage.json")["rows"]:
-        from bayespinn import methods
+    """One per row of each coverage table (the Exeter deflection one, and one per other girder or case), at
+    its replicate count, started afresh (no --resume)."""
+    from bayespinn import methods
 
-        name = methods.by_key(row["method"]).name
-        snr = f"{row['snr_db']:g}"
-        study = f"{PAPER}/{row['file']}"
-        out.append(
-            Job(
-                f"coverage-{name}-snr{snr}",
-                (PY, "studies/coverage.py", "--methods", name, "--snr", snr,
-                 "--replicates", f"{name}={row['replicates']}", "--out", PAPER, "--quiet"),
-                study,
-                (study + ".partial.jsonl",),
-            )
-        )  # fmt: skip
+    out = []
+    for page in sorted((ROOT / PAPER).glob("coverage*.json")):
+        doc = _load(f"{PAPER}/{page.name}")
+        which = ("--config", doc["config"], "--case", doc["case"]) if doc.get("config") else ()
+        tag = page.stem.removeprefix("coverage")
+        for row in doc["rows"]:
+            name = methods.by_key(row["method"]).name
+            snr = f"{row['snr_db']:g}"
+            study = f"{PAPER}/{row['file']}"
+            out.append(
+                Job(
+                    f"coverage{tag}-{name}-snr{snr}",
+                    (PY, "studies/coverage.py", *which, "--methods", name, "--snr", snr,
+                     "--replicates", f"{name}={row['replicates']}", "--out", PAPER, "--quiet"),
+                    study,
+                    (study + ".partial.jsonl",),
+                )
+            )  # fmt: skip
     return out
 
 
 #: the family studies the page cites: (case, SNR, bridges)
 FAMILY = (("deflection", "30", 24), ("deflection", "10", 12), ("strain", "30", 6))
+#: the held-out family's studies: (case, SNR, bridges)
+HELD_OUT = (("deflection", "30", 24), ("strain", "30", 12))
 #: the girder studies: (config, case, SNR, replicates)
 GIRDERS = (
     ("bearings", "deflection", "30", 100),
@@ -104,6 +111,19 @@ def _study_jobs() -> list[Job]:
                 f"family-{case}-snr{snr}",
                 (PY, "studies/family.py", "--bridges", str(n), "--snr", snr, "--case", case,
                  "--time-reference", "--out", PAPER, "--quiet"),
+                study,
+                (study,),
+            )
+        )  # fmt: skip
+    from family import HELD_OUT_SEED
+
+    for case, snr, n in HELD_OUT:
+        study = f"{PAPER}/family/heldout-{case}-snr{snr}.json"
+        out.append(
+            Job(
+                f"family-heldout-{case}-snr{snr}",
+                (PY, "studies/family.py", "--bridges", str(n), "--snr", snr, "--case", case,
+                 "--family-seed", str(HELD_OUT_SEED), "--out", PAPER, "--quiet"),
                 study,
                 (study,),
             )

@@ -16,7 +16,6 @@ import dataclasses
 import hashlib
 import json
 import logging
-import os
 import sys
 import time
 import zlib
@@ -33,6 +32,7 @@ from ..errors import InputError
 from ..executor import Executor, task_resources
 from ..options import RunOptions
 from ..provenance import commits, provenance, record_commit
+from .replicates import Checkpoint, earlier_records
 
 log = logging.getLogger(__name__)
 
@@ -123,7 +123,7 @@ def _score(task: Replicate, cfg: Config, post) -> dict:
     true = cfg.beam.EI
     lo, hi = post.interval(task.level)
     d = post.EI.ravel()
-    return {
+    out = {
         "index": task.index,
         "EI_true": true,
         "hit": bool(lo <= true <= hi),
@@ -133,6 +133,50 @@ def _score(task: Replicate, cfg: Config, post) -> dict:
         "sd_rel_pct": float(100 * d.std(ddof=1) / true),
         "converged": bool(post.diagnostics.get("converged", True)),
         **record_commit(),
+    }
+    rho = ar1_draws(post, cfg)
+    if rho is not None:  # the AR(1) coefficient the likelihood infers, against the one simulated
+        t = cfg.data.noise_ar1
+        a = (1.0 - task.level) / 2.0
+        r_lo, r_hi = (float(q) for q in np.quantile(rho, [a, 1.0 - a]))
+        out["noise_ar1"] = {
+            "true": t,
+            "hit": bool(r_lo <= t <= r_hi),
+            "interval": [r_lo, r_hi],
+            "rank": float(np.mean(rho < t)),
+            "mean": float(rho.mean()),
+            "sd": float(rho.std(ddof=1)),
+        }
+    return out
+
+
+def ar1_draws(post, cfg: Config) -> np.ndarray | None:
+    """The posterior draws of the noise's AR(1) coefficient when the analysis infers it, else None."""
+    if cfg.model.noise != "ar1":
+        return None
+    rho = getattr(post, "noise_ar1", None)
+    return None if rho is None else np.asarray(rho, float).ravel()
+
+
+def parameter_coverage(recs: list[dict], key: str, level: float) -> dict | None:
+    """Hits, coverage, acceptance region and rank uniformity of a further parameter's intervals (`key` in
+    every record, e.g. noise_ar1), or None when some record lacks it."""
+    if not recs or any(key not in r for r in recs):
+        return None
+    n = len(recs)
+    hits = int(sum(r[key]["hit"] for r in recs))
+    ranks = np.array([r[key]["rank"] for r in recs])
+    return {
+        "true": recs[0][key]["true"],
+        "replicates": n,
+        "hits": hits,
+        "coverage": hits / n,
+        "coverage_ci95": list(clopper_pearson(hits, n)),
+        "acceptance_99": list(binomial_acceptance(n, level)),
+        "verdict": verdict(hits, n, level),
+        "rank_uniformity_p": float(stats.kstest(ranks, "uniform").pvalue) if n > 1 else None,
+        "mean": float(np.mean([r[key]["mean"] for r in recs])),
+        "mean_sd": float(np.mean([r[key]["sd"] for r in recs])),
     }
 
 
@@ -192,78 +236,6 @@ def fingerprint(
         "seeding": SEEDING,
     }
     return hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode()).hexdigest()[:16]
-
-
-class Checkpoint:
-    """Finished replicates of one study, one JSON line each after a header line with the study's fingerprint,
-    appended and flushed as each replicate ends, so an interrupted study resumes where it stopped.
-
-    Opening reads the file and writes nothing: the file is rewritten (the resumed replicates, without lines
-    a crash cut short, or afresh when it belonged to another study) only when the first new replicate is
-    added. A study refused or stopped before it finished any replicate therefore leaves the file exactly as
-    it found it, and the next run resumes from the same replicates."""
-
-    def __init__(self, path: str | Path, key: str, earlier: dict[int, dict] | None = None):
-        self.path, self.key = Path(path), key
-        self.done: dict[int, dict] = dict(earlier or {})
-        self._rewritten = False
-        if self.path.exists():
-            lines = self.path.read_text(encoding="utf-8").splitlines()
-            head = json.loads(lines[0]) if lines else {}
-            if head.get("fingerprint") == key:
-                for ln in lines[1:]:
-                    try:
-                        rec = json.loads(ln)
-                    except json.JSONDecodeError:  # a line cut short by a crash
-                        continue
-                    self.done[int(rec["index"])] = rec
-                log.info("resuming from %s: %d replicates already done", self.path, len(self.done))
-            else:
-                log.warning("%s belongs to a different study; starting afresh", self.path)
-
-    def _rewrite(self) -> None:
-        from .posterior import jsonable
-
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        with tmp.open("w", encoding="utf-8") as fh:
-            fh.write(json.dumps({"fingerprint": self.key}) + "\n")
-            for rec in self.done.values():
-                fh.write(json.dumps(jsonable(rec)) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        tmp.replace(self.path)  # never a half-written checkpoint
-        self._rewritten = True
-
-    def add(self, rec: dict) -> None:
-        from .posterior import jsonable
-
-        if not self._rewritten:
-            self._rewrite()
-        with self.path.open("a", encoding="utf-8") as fh:
-            fh.write(json.dumps(jsonable(rec)) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-
-
-def earlier_records(path: str | Path, key: str) -> dict[int, dict]:
-    """The per-replicate records of a study file written earlier (`coverage_study`'s JSON) when it is the same
-    study (same fingerprint), else none: a study carried over several sessions resumes from its committed
-    file, where the checkpoint of an interrupted run is gone."""
-    path = Path(path)
-    if not path.is_file():
-        return {}
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError):
-        log.warning("%s is not a study file; nothing reused from it", path)
-        return {}
-    if doc.get("fingerprint") != key:
-        log.info(
-            "%s is another study (or predates study fingerprints); nothing reused from it", path
-        )
-        return {}
-    return {int(r["index"]): r for r in doc.get("records", [])}
 
 
 def study_options(method: str, snr_db, opts: RunOptions | None) -> RunOptions:
@@ -339,6 +311,10 @@ def coverage_study(
     p = float(stats.kstest(ranks, "uniform").pvalue) if replicates > 1 else float("nan")
     from .posterior import jsonable
 
+    extra = {}
+    rho = parameter_coverage(recs, "noise_ar1", level)
+    if rho is not None:
+        extra["noise_ar1"] = rho
     return {
         "schema": "bayespinn.coverage/1",
         "method": methods.get(method).key,
@@ -363,6 +339,7 @@ def coverage_study(
         "power_vs_80": power(replicates, level),
         "verdict": verdict(hits, replicates, level),
         "fingerprint": key,
+        **extra,
         "config": jsonable(cfg.to_dict()),
         # who wrote this file: the command, commit, machine and date of the run that finished it (each
         # replicate's own commit is in its record)
