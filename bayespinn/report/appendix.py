@@ -37,6 +37,8 @@ def _other_diag(d: dict) -> str:
 
 
 def diagnostics_section(summary: dict) -> list[Block]:
+    from ..uq.ensemble_pool import MAX_SCATTER_RATIO  # noqa: PLC0415 - torch only when a report is made
+
     rows = []
     for key, m in summary["methods"].items():
         d = m.get("diagnostics") or {}
@@ -72,7 +74,9 @@ def diagnostics_section(summary: dict) -> list[Block]:
             rows,
             "R-hat and ESS from ArviZ (rank-normalised split R-hat); divergences and tree depths from NUTS; "
             "converged: R-hat <= 1.01, bulk and tail ESS >= 400, and (NUTS) no divergence and no trajectory "
-            "cut at the maximum depth. n/a where a method has none.",
+            "cut at the maximum depth; for the deep ensemble, its members' means within "
+            f"{MAX_SCATTER_RATIO:g} x their own widths, a last-layer marginal for every member and no noise "
+            "grid cutting off its posterior. n/a where a method has none.",
         ),
     ]
     for key, m in summary["methods"].items():

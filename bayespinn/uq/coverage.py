@@ -131,7 +131,9 @@ def _score(task: Replicate, cfg: Config, post) -> dict:
         "rank": float(np.mean(d < true)),
         "rel_error_pct": float(100 * (d.mean() - true) / true),
         "sd_rel_pct": float(100 * d.std(ddof=1) / true),
-        "converged": bool(post.diagnostics.get("converged", True)),
+        "converged": post.diagnostics.get(
+            "converged"
+        ),  # the method's own verdict (None: it has none)
         **record_commit(),
     }
     rho = ar1_draws(post, cfg)
@@ -148,6 +150,12 @@ def _score(task: Replicate, cfg: Config, post) -> dict:
             "sd": float(rho.std(ddof=1)),
         }
     return out
+
+
+def converged_fraction(recs: list[dict]) -> float | None:
+    """The share of replicates whose method said it converged, of those that gave a verdict."""
+    v = [bool(r["converged"]) for r in recs if r.get("converged") is not None]
+    return float(np.mean(v)) if v else None
 
 
 def ar1_draws(post, cfg: Config) -> np.ndarray | None:
@@ -332,7 +340,7 @@ def coverage_study(
         "seed": seed,
         "truth": truth,
         "acceptance_99": list(binomial_acceptance(replicates, level)),
-        "converged_fraction": float(np.mean([r["converged"] for r in recs])),
+        "converged_fraction": converged_fraction(recs),
         "resumed_replicates": sum(1 for i in range(replicates) if i in have),
         "commits": commits(recs),
         "seeding": SEEDING,

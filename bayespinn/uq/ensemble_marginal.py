@@ -48,6 +48,21 @@ class SigmaGrid:
         p = self.prob if self.z is None else self.prob.sum(axis=1)
         return float(np.exp(self.log_sigma[int(np.argmax(p))]))
 
+    def at_edge(self, tol: float) -> bool:
+        """Does the density at an edge of the grid exceed `tol` of its peak (the grid cuts off mass)? The
+        coefficient's axis is exempt where it is clipped at the support's bound."""
+        from .ar1 import Z_MAX
+
+        p = self.prob / self.prob.max()
+        if self.z is None:
+            return bool(max(p[0], p[-1]) > tol)
+        edges = [p[0].max(), p[-1].max()]
+        if self.z[0] > -Z_MAX:
+            edges.append(p[:, 0].max())
+        if self.z[-1] < Z_MAX:
+            edges.append(p[:, -1].max())
+        return bool(max(edges) > tol)
+
     @property
     def z_mode(self) -> float | None:
         """The mode of z = atanh rho's marginal, or None for white noise."""

@@ -17,6 +17,7 @@ from .. import seeding
 from ..threads import torch_threads
 from .ensemble_marginal import local_sd, member_marginal, pool_log_ei
 from .lastlayer import (
+    GRID_EDGE,
     IDENTIFIED_FRACTION,
     LastLayerPredictor,
 )
@@ -139,7 +140,8 @@ def pooled_posterior(
         info["note"] = "EI is not identified by these data"
     # self-check: members whose posteriors' means scatter far more than each one's own width read EI
     # differently from their features; the mixture is then mostly the spread between networks
-    if n_marg > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var:
+    disagree = bool(n_marg > 1 and lap_var > 0 and between > MAX_SCATTER_RATIO**2 * lap_var)
+    if disagree:
         msg = (
             f"the members disagree: their posteriors' means spread by sd {math.sqrt(between):.3f} in log EI, "
             f"{math.sqrt(between / lap_var):.1f} x each member's own width ({math.sqrt(lap_var):.3f}); "
@@ -150,7 +152,26 @@ def pooled_posterior(
         log.warning("[ensemble] %s", msg)
     if warn:
         info["warnings"] = warn
+    # the verdict: the members agree within their own widths, each has a marginal of its own, and no
+    # noise grid cuts off its posterior's mass
+    checks = {
+        "members_agree": not disagree,
+        "every_member_has_a_marginal": not bad,
+        "noise_grids_hold_their_mass": not any(g.at_edge(GRID_EDGE) for g in grids),
+    }
+    why = {
+        "members_agree": f"the members' means scatter more than {MAX_SCATTER_RATIO:g} x their own widths",
+        "every_member_has_a_marginal": "some member has no last-layer marginal of its own",
+        "noise_grids_hold_their_mass": "a noise grid cuts off part of its posterior",
+    }
     diag = {
+        "converged": all(checks.values()),
+        "convergence_checks": checks,
+        **(
+            {"problems": [why[k] for k, ok in checks.items() if not ok]}
+            if not all(checks.values())
+            else {}
+        ),
         "fit_runtime_s": p1.runtime_s + p2.runtime_s,
         "beta_factor": float(np.median(p2.beta_factor)),
         "training": training,
