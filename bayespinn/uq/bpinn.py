@@ -140,7 +140,8 @@ def lastlayer_posterior(
             cfg,
             executor,
         )
-    return assemble(
+    share = diag.pop("network_share")
+    post = assemble(
         draws,
         diag,
         pred,
@@ -153,6 +154,8 @@ def lastlayer_posterior(
         t0=t0,
         warm_start=warm,
     )
+    post.info["network_share"] = share  # of the fit the posterior is built on
+    return post
 
 
 def _sample_last_layer(
@@ -184,6 +187,7 @@ def _sample_last_layer(
         "samples": s.samples,
         **nuts_health(runs),
         "pseudo_sd": {"pde": ll.s_f, "bc": ll.s_b, "ic": ll.s_i},
+        "network_share": ll.network_share,
         "first_mode": {
             "follows_EI": ll.first_mode_varies,
             "vibration_z2": ll.vibration_z2,

@@ -132,6 +132,9 @@ def pooled_posterior(
             else {}
         ),
         "member_first_mode_follows_EI": [ll.first_mode_varies for ll in lls],
+        # the share of the fitted response's energy the network carries beyond the enrichment
+        "network_share": float(np.median([ll.network_share for ll in lls])),
+        "member_network_share": [ll.network_share for ll in lls],
         "identified": ident,
     }
     if M == 1:

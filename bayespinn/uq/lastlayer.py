@@ -217,6 +217,11 @@ class LastLayer(LastLayerPosterior):
         self.s_i = max(float((Cm @ gamma_fit).pow(2).mean().sqrt()), MIN_PSEUDO_SD)
         self.s_w = WEIGHT_PRIOR_FACTOR * float(gamma_fit.abs().max())
         self.beta_fit = beta_fit
+        # the fitted response's energy at the data points that the network's own columns carry, beyond
+        # the fixed extras (the enrichment and the vibrations, the reference's modal model)
+        n_net = model.head.shape[1] - model.extra_head.shape[1]
+        w_fit, w_net = D @ beta_fit, D[:, :n_net] @ beta_fit[:n_net]
+        self.network_share = float(w_net.pow(2).sum() / w_fit.pow(2).sum().clamp_min(1e-300))
         self.n = y.numel()
         self.k = D.shape[1]
         self.fit_resid = (y - D @ beta_fit).numpy()
