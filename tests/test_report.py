@@ -456,3 +456,31 @@ def test_per_sensor_figures_give_one_row_per_crossing(defl, tmp_path):
     sensor_figure(both, rows, "two", tmp_path / "two.png", rng)
     assert "90 %" in one
     assert _png_height(tmp_path / "two.png") > 1.7 * _png_height(tmp_path / "one.png")
+
+
+def test_the_report_says_where_a_disagreement_comes_from():
+    """Each PINN's network share is stated; a PINN that disagrees with a reference whose model fits is
+    blamed, one that disagrees with a misfitting reference puts the reference's model in question, and one
+    that agrees with a misfitting reference is said to share its error."""
+    from bayespinn.report.content import network_lines
+
+    def methods(ref_verdict, pinn_mean):
+        return {
+            "modal_mcmc": {
+                "EI": {"mean": 1.0e9, "sd": 1.0e7},
+                "fit_check": {"verdict": ref_verdict},
+            },
+            "ensemble": {"EI": {"mean": pinn_mean, "sd": 1.0e7}, "network_share": 3.4e-5},
+        }
+
+    def text(ref_verdict, pinn_mean):
+        m = methods(ref_verdict, pinn_mean)
+        (block,) = network_lines(m, {v.method: v for v in agreement(m)})
+        return " ".join(block.items)
+
+    assert "carries 0.0034 % of the fitted response" in text("fits", 1.0e9)
+    assert "comes from the PINN" in text("fits", 1.05e9)
+    assert "reference's model is in question" in text("misfit", 1.05e9)
+    assert "shares the reference's error" in text("misfit", 1.0e9)
+    assert "shares" not in text("fits", 1.0e9) and "PINN" not in text("fits", 1.0e9).split(":")[1]
+    assert network_lines({"modal_mcmc": {"EI": {"mean": 1.0e9, "sd": 1.0e7}}}, {}) == []

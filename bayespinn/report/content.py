@@ -371,11 +371,44 @@ def comparison_section(summary: dict) -> list[Block]:
         out.append(BulletList(tuple(v.sentence() for v in verdicts.values())))
     for c in caveats(methods):
         out.append(Alert(c, "info"))
+    out += network_lines(methods, verdicts)
     for key, m in methods.items():
         if m.get("member_EI"):
             members = ", ".join(fmt_EI(v) for v in m["member_EI"])
             out.append(Paragraph(f"{name(key)} members' EI (GN m²): {members}."))
     return out
+
+
+def network_lines(methods: dict, verdicts: dict) -> list[Block]:
+    """How much of each PINN's fit its network carries beyond the enrichment (the reference's modal model),
+    and where a disagreement with the reference comes from: the reference's model (its fit check says
+    misfit) or the PINN."""
+    ref_fc = ((methods.get(REFERENCE_KEY) or {}).get("fit_check") or {}).get("verdict")
+    lines = []
+    for key, m in methods.items():
+        share = m.get("network_share")
+        if share is None:
+            continue
+        line = (
+            f"{name(key)}: its network carries {100 * share:.2g} % of the fitted response's energy beyond "
+            "the enrichment (the reference's modal model)"
+        )
+        v = verdicts.get(key)
+        if v is not None and v.agrees is False:
+            line += (
+                "; it disagrees with the reference, whose model the fit check finds at odds with the data: "
+                "the reference's model is in question"
+                if ref_fc == "misfit"
+                else "; it disagrees with the reference, whose model fits the data: the disagreement comes "
+                "from the PINN"
+            )
+        elif v is not None and v.agrees and ref_fc == "misfit":
+            line += (
+                "; it agrees with a reference whose model does not fit these data, so it shares the "
+                "reference's error rather than correcting it"
+            )
+        lines.append(line + ".")
+    return [BulletList(tuple(lines))] if lines else []
 
 
 def figures_section(figures: list[FigureFile], notes: list[str]) -> list[Block]:
