@@ -63,8 +63,8 @@ def add_method_flags(p: argparse.ArgumentParser) -> None:
         "--bpinn-variant",
         dest="bpinn_variant",
         default="auto",
-        help="B-PINN sampler: last-layer, full (every hidden weight), or auto (default: full for "
-        "--profile paper, else last-layer)",
+        help="B-PINN sampler: last-layer, full (every hidden weight; hours per run, see docs/methods.md), "
+        "or auto (default: last-layer)",
     )
     p.add_argument("--quiet", action="store_true", help="no progress output")
     p.add_argument(

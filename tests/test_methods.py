@@ -35,8 +35,14 @@ def test_bpinn_settings_pick_the_variant():
     from bayespinn.methods.bpinn import FullWeightBPINN, LastLayerBPINN
 
     assert type(methods.build("bpinn", RunOptions(profile="fast"))) is LastLayerBPINN
-    assert type(methods.build("bpinn", RunOptions(profile="paper"))) is FullWeightBPINN
+    assert (
+        type(methods.build("bpinn", RunOptions(profile="paper"))) is LastLayerBPINN
+    )  # never a default
     assert type(methods.get("bpinn")(bpinn_variant="full", profile="smoke")) is FullWeightBPINN
+    assert (
+        type(methods.build("bpinn", RunOptions(profile="paper", bpinn_variant="full")))
+        is FullWeightBPINN
+    )
 
 
 @pytest.mark.parametrize(

@@ -1,6 +1,6 @@
 """The B-PINN, in two variants: last-layer (`uq.bpinn`, the fast default) and full-weight
 (`uq.bpinn_full`). `BPINN` is the registered method (CLI `bpinn`); built from settings it becomes the
-variant they name (`uq.bpinn_core.resolve_variant`: 'auto' is full-weight for the paper profile)."""
+variant they name (`uq.bpinn_core.resolve_variant`: 'auto' is the last-layer one)."""
 
 from __future__ import annotations
 

@@ -34,19 +34,19 @@ VARIANTS = ("auto", "last-layer", "full")
 
 
 def resolve_variant(name: str, profile: str) -> str:
-    """'last-layer' or 'full': 'auto' runs the full-weight sampler (`bpinn_full`) for the paper profile, the
-    last-layer one otherwise, on a GPU too.
+    """'last-layer' or 'full': 'auto' is the last-layer sampler for every profile and device; the full-weight
+    one (`bpinn_full`) runs only when asked for (`--bpinn-variant full`).
 
-    The device does not decide it: measured on an H100 (fast profile, 20 dB), one gradient of the full
-    potential took 0.086 s (0.17 s on the 2-core CPU; the small 5 x 64 network's fourth-order jets are
-    launch-bound, not arithmetic-bound) and NUTS warm-up cut its step size to 2.4e-4, the third iteration taking
-    16 s, so the fast profile's 3 200 iterations would take hours on a GPU as well (~20 h at the tree-depth
-    limit); the fast profile promises minutes."""
+    Why it is no default, measured: on an H100 (fast profile, 20 dB) one gradient of the full potential took
+    0.086 s (0.17 s on the 2-core CPU; the small 5 x 64 network's fourth-order jets are launch-bound, not
+    arithmetic-bound) and NUTS warm-up cut its step size to 2.4e-4, the third iteration taking 16 s, so the
+    fast profile's 3 200 iterations would take hours on a GPU as well (~20 h at the tree-depth limit); it has
+    never converged on the quick start, and the paper profile (16 832 hidden weights, 4 x 2000 iterations) is
+    hours to days per run with no converged record. `profile` is kept for the callers' signature."""
     if name not in VARIANTS:
         raise ValueError(f"B-PINN variant must be one of {', '.join(VARIANTS)}, got {name!r}")
-    if name != "auto":
-        return name
-    return "full" if profile == "paper" else "last-layer"
+    del profile
+    return "last-layer" if name == "auto" else name
 
 
 class LastLayerPotential:

@@ -18,8 +18,8 @@ The first mode's free vibration, where the profile has one, stays at the fitted 
 
 Cost: each NUTS step evaluates the network's jets to fourth order at every point and back-propagates
 through them and through one (H+1) x (H+1) Cholesky factorisation; a trajectory takes up to
-2^max_tree_depth such steps. `bpinn.resolve_variant` picks it for `--profile paper`; everywhere else,
-on a GPU too, the fast default is the last-layer variant.
+2^max_tree_depth such steps. It runs only when asked for (`--bpinn-variant full`): every default, on a
+GPU too, is the last-layer variant (`bpinn_core.resolve_variant` says why).
 
 Measured on a 2-core CPU (float64, one gradient of the potential): paper profile (16 832 hidden weights,
 2500 / 2000 / 1000 points) 0.17 s with two threads, 0.30 s with one. The paper profile's 4 x 2000
