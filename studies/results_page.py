@@ -101,14 +101,58 @@ def _coverage() -> Section:
                     ".3f",
                 ),
             ]
+    out += _ar1_coverage()
     return Section(
         "Coverage of the true EI",
         "Independent synthetic datasets of the Exeter girder (deflection case); a calibrated 90 % "
         "interval holds the truth in about 90 % of them, inside the binomial 99 % acceptance region. "
         "z = (mean - reference mean) / reference sd on the same dataset; sd ratio = sd / reference sd. "
-        "Page: `reports/paper/coverage.md`.",
+        "Page: `reports/paper/coverage.md`."
+        + (
+            " Rows named AR(1) noise: strain records whose noise is AR(1) with coefficient 0.8 at 200 Hz "
+            "(`examples/ar1-strain-ar1.toml`), analysed with the AR(1) likelihood, the coefficient's "
+            "interval scored beside EI's; page `reports/paper/coverage-ar1-strain-ar1-strain.md`."
+            if any(e.record == AR1_COV for e in out)
+            else ""
+        ),
         tuple(out),
     )
+
+
+#: coverage under AR(1) noise: the strain case of examples/ar1-strain-ar1.toml, analysed with the AR(1) model
+AR1_COV = "reports/paper/coverage-ar1-strain-ar1-strain.json"
+
+
+def _ar1_coverage() -> list[Entry]:
+    """The AR(1) coverage table's rows, for the methods it has: EI's and the coefficient's hits."""
+    try:
+        rows = json.loads((ROOT / AR1_COV).read_text(encoding="utf-8"))["rows"]
+    except (OSError, ValueError, KeyError):
+        return []
+    out = []
+    for r in rows:
+        k, snr = r["method"], f"{r['snr_db']:g}"
+        row = f"rows[method={k},snr_db={snr}]"
+        tag = f"AR(1) noise (strain, coefficient 0.8), {NAMES[k]}, {snr} dB"
+        out += [
+            Entry(f"{tag}: datasets", AR1_COV, f"{row}.replicates", "d"),
+            Entry(f"{tag}: EI intervals holding the truth", AR1_COV, f"{row}.hits", "d"),
+            Entry(f"{tag}: 99 % region, low", AR1_COV, f"{row}.acceptance_99[0]", "d"),
+            Entry(f"{tag}: 99 % region, high", AR1_COV, f"{row}.acceptance_99[1]", "d"),
+            Entry(
+                f"{tag}: coefficient intervals holding the truth",
+                AR1_COV,
+                f"{row}.noise_ar1.hits",
+                "d",
+            ),
+            Entry(
+                f"{tag}: coefficient's rank-uniformity p",
+                AR1_COV,
+                f"{row}.noise_ar1.rank_uniformity_p",
+                ".3f",
+            ),
+        ]
+    return out
 
 
 FAM = "reports/paper/family.json"
