@@ -9,7 +9,8 @@ tracing per step), several chains from a dispersed start around the MAP; ArviZ g
 `nuts` the divergences, tree depths and warnings, all of which decide whether the run counts as converged.
 
 This is the fast default. `bpinn_full` samples every hidden weight too (the same model with the hidden
-layers free); it runs only when `--bpinn-variant full` asks for it (`bayespinn.methods.bpinn`), and the summary's `info.variant` names the one that ran.
+layers free); it runs only when `--bpinn-variant full` asks for it (`bayespinn.methods.bpinn`), and the
+summary's `info.variant` names the one that ran.
 """
 
 from __future__ import annotations

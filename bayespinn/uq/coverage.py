@@ -131,16 +131,16 @@ def _score(task: Replicate, cfg: Config, post) -> dict:
         "rank": float(np.mean(d < true)),
         "rel_error_pct": float(100 * (d.mean() - true) / true),
         "sd_rel_pct": float(100 * d.std(ddof=1) / true),
-        "converged": post.diagnostics.get(
-            "converged"
-        ),  # the method's own verdict (None: it has none)
+        # the method's own verdict (None: it has none)
+        "converged": post.diagnostics.get("converged"),
         **record_commit(),
     }
     rho = ar1_draws(post, cfg)
     if rho is not None:  # the AR(1) coefficient the likelihood infers, against the one simulated
+        from .posterior import central_interval
+
         t = cfg.data.noise_ar1
-        a = (1.0 - task.level) / 2.0
-        r_lo, r_hi = (float(q) for q in np.quantile(rho, [a, 1.0 - a]))
+        r_lo, r_hi = central_interval(rho, task.level)
         out["noise_ar1"] = {
             "true": t,
             "hit": bool(r_lo <= t <= r_hi),

@@ -158,23 +158,24 @@ def pooled_posterior(
     # the verdict: the members agree within their own widths, each has a marginal of its own, and no
     # noise grid cuts off its posterior's mass
     checks = {
-        "members_agree": not disagree,
-        "every_member_has_a_marginal": not bad,
-        "noise_grids_hold_their_mass": not any(g.at_edge(GRID_EDGE) for g in grids),
-    }
-    why = {
-        "members_agree": f"the members' means scatter more than {MAX_SCATTER_RATIO:g} x their own widths",
-        "every_member_has_a_marginal": "some member has no last-layer marginal of its own",
-        "noise_grids_hold_their_mass": "a noise grid cuts off part of its posterior",
-    }
-    diag = {
-        "converged": all(checks.values()),
-        "convergence_checks": checks,
-        **(
-            {"problems": [why[k] for k, ok in checks.items() if not ok]}
-            if not all(checks.values())
-            else {}
+        "members_agree": (
+            not disagree,
+            f"the members' means scatter more than {MAX_SCATTER_RATIO:g} x their own widths",
         ),
+        "every_member_has_a_marginal": (
+            not bad,
+            "some member has no last-layer marginal of its own",
+        ),
+        "noise_grids_hold_their_mass": (
+            not any(g.at_edge(GRID_EDGE) for g in grids),
+            "a noise grid cuts off part of its posterior",
+        ),
+    }
+    problems = [why for ok, why in checks.values() if not ok]
+    diag = {
+        "converged": not problems,
+        "convergence_checks": {k: ok for k, (ok, _) in checks.items()},
+        **({"problems": problems} if problems else {}),
         "fit_runtime_s": p1.runtime_s + p2.runtime_s,
         "beta_factor": float(np.median(p2.beta_factor)),
         "training": training,
