@@ -28,11 +28,22 @@ log = logging.getLogger("studies.render")
 GATHERED = ("family", "girders", "girder_pinns", "fitcheck")
 
 
+def module_of(name: str) -> str:
+    """The study script that renders page `name`: coverage-<girder>-<case> pages are coverage's."""
+    return "coverage" if name.startswith("coverage") else name
+
+
+def pages(out: Path) -> list[str]:
+    """The table pages under <out>: coverage (and one per other girder or case) and the paper's tables."""
+    cov = sorted(p.stem for p in out.glob("coverage*.json"))
+    return cov + [t for t in ("table4", "table5", "table6") if (out / f"{t}.json").exists()]
+
+
 def page_text(name: str, out: Path) -> str | None:
     """The markdown today's code renders for <out>/<name>.json (None when the JSON is not there)."""
     from bayespinn.report.markdown import render_markdown
 
-    mod = importlib.import_module(name)
+    mod = importlib.import_module(module_of(name))
     if name in GATHERED:  # gathered from the study files under <out>/<name>
         page = mod.gather(out)
         return render_markdown(mod.blocks(page)) if page["studies"] else None
@@ -40,7 +51,7 @@ def page_text(name: str, out: Path) -> str | None:
     if not path.exists():
         return None
     doc = c.load_table(path, mod.SCHEMA)
-    if name == "coverage":
+    if module_of(name) == "coverage":
         mod.refresh(doc, out, figure=False)
     return render_markdown(mod.blocks(doc))
 
@@ -53,13 +64,11 @@ def main(argv: list[str] | None = None) -> int:
     args = p.parse_args(sys.argv[1:] if argv is None else argv)
     c.setup_logging(False)
     out = Path(args.out)
-    for name in ("coverage", "table4", "table5", "table6"):
+    for name in pages(out):
         path = out / f"{name}.json"
-        if not path.exists():
-            continue
-        mod = importlib.import_module(name)
+        mod = importlib.import_module(module_of(name))
         doc = c.load_table(path, mod.SCHEMA)
-        if name == "coverage":
+        if module_of(name) == "coverage":
             mod.write_page(doc, out)
         else:
             c.write_markdown(out / f"{name}.md", mod.blocks(doc))

@@ -205,6 +205,8 @@ def test_an_older_record_loads_with_its_commit_and_a_date():
 
 # ------------------------------------------------------------------------------------------ pages
 PAGES = ("coverage", "table4", "table5", "table6", "family", "girders", "girder_pinns", "fitcheck")
+#: coverage studies of other girders and cases, each its own page
+PAGES += tuple(p.stem for p in sorted((ROOT / "reports" / "paper").glob("coverage-*.json")))
 
 
 @pytest.fixture(scope="module")
