@@ -148,6 +148,10 @@ def study(args, argv, snr, names) -> dict:
         doc["time_reference"] = run_time_reference(args, opts, names)
         c.write_json(path, doc)
     wanted = range(args.start, args.start + args.bridges)
+    # the bridges asked for so far (a study grown over sessions asks for more): the page says partial
+    # while fewer are done
+    doc["planned"] = sorted(set(doc.get("planned") or []) | set(wanted))
+    c.write_json(path, doc)
     for n_done, i in enumerate(wanted):
         if i in have:
             continue
@@ -279,6 +283,14 @@ def blocks(page: dict) -> list:
         )
         if s.get("label"):
             out.append(Paragraph(f"**{s['label'][0].upper()}{s['label'][1:]}.**"))
+        missing = sorted(set(s.get("planned") or []) - {r["bridge"]["index"] for r in s["records"]})
+        if missing:
+            out.append(
+                Alert(
+                    f"Partial: {len(s['records'])} of {len(s['planned'])} planned bridges so far (the same "
+                    "command resumes the rest)."
+                )
+            )
         crit_rows = []
         for k, cr in s["criteria"].items():
             p = cr["pass"]
