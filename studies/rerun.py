@@ -104,26 +104,19 @@ KEPT = {
 
 def _study_jobs() -> list[Job]:
     out = []
-    for case, snr, n in FAMILY:
-        study = f"{PAPER}/family/{case}-snr{snr}.json"
-        out.append(
-            Job(
-                f"family-{case}-snr{snr}",
-                (PY, "studies/family.py", "--bridges", str(n), "--snr", snr, "--case", case,
-                 "--time-reference", "--out", PAPER, "--quiet"),
-                study,
-                (study,),
-            )
-        )  # fmt: skip
-    from family import HELD_OUT_SEED
+    from family import DEVELOPMENT_SEED, HELD_OUT_SEED, study_stem
 
-    for case, snr, n in HELD_OUT:
-        study = f"{PAPER}/family/heldout-{case}-snr{snr}.json"
+    # the development family's studies time the Exeter yardstick; the held-out family's name their seed
+    families = [(DEVELOPMENT_SEED, ("--time-reference",), *f) for f in FAMILY]
+    families += [(HELD_OUT_SEED, ("--family-seed", str(HELD_OUT_SEED)), *f) for f in HELD_OUT]
+    for seed, extra, case, snr, n in families:
+        stem = study_stem(case, float(snr), seed)
+        study = f"{PAPER}/family/{stem}.json"
         out.append(
             Job(
-                f"family-heldout-{case}-snr{snr}",
+                f"family-{stem}",
                 (PY, "studies/family.py", "--bridges", str(n), "--snr", snr, "--case", case,
-                 "--family-seed", str(HELD_OUT_SEED), "--out", PAPER, "--quiet"),
+                 *extra, "--out", PAPER, "--quiet"),
                 study,
                 (study,),
             )
