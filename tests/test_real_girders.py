@@ -171,16 +171,14 @@ def test_damaged_girder_run_finds_the_segment_and_reports_it(tmp_path):
     [
         ("", "bpinn", "model.EI_segments", ["--bpinn-variant", "full"]),
         ('[model]\nnoise = "ar1"\n', "bpinn", "model.noise", ["--bpinn-variant", "full"]),
-        ('[model]\nEI_segments = 5\nnoise = "ar1"\n', "ensemble", "model.noise", []),
-        ('[model]\nEI_segments = 5\nnoise = "ar1"\n', "bpinn", "model.noise", []),
     ],
 )
 def test_methods_refuse_what_they_cannot_describe_before_anything_runs(
     tmp_path, extra, method, field, args
 ):
-    """The full-weight B-PINN asked for EI per segment or the AR(1) likelihood, or a PINN method for AR(1) noise
-    on a girder with EI per segment (the girder PINN's likelihood is white; the reference has both): exit 2,
-    one line naming the field, nothing written, before the reference (which would take minutes) runs."""
+    """The full-weight B-PINN asked for EI per segment or the AR(1) likelihood (its sampler has neither; the
+    last-layer variant and the reference have both): exit 2, one line naming the field, nothing written,
+    before the reference (which would take minutes) runs."""
     cfg = tmp_path / "c.toml"
     text = (REPO / "examples" / "damaged-girder.toml").read_text()
     if extra:

@@ -2,16 +2,25 @@
 output layer (c, c_E) integrated out exactly on fixed points, with pseudo-sds stated from the fit's own
 residuals (`GirderLastLayer`), and its MAP, gradient, Hessian and covariance in phi for the deep ensemble's
 importance sampling and the B-PINN's NUTS. The posteriors built on it are in `uq.girder_pinn`.
+
+AR(1) noise (`noise`, `uq.ar1`): the data rows are whitened along each sensor's series at the coefficient
+rho = tanh(zeta), zeta the last coordinate after log sigma, exactly as `uq.lastlayer` does for the uniform
+girder: x_k -> (x_k - rho x_(k-1)) / sqrt(1 - rho^2) for every non-first sample, the whitening's Jacobian
+(n - m) log cosh zeta for m series, and rho's uniform prior. The network's features' Gram products split
+into four fixed pieces (first, current and previous rows, `_pieces`) combined at each rho; the enrichment
+column, which changes with phi, is whitened where it is used.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import torch
 
 from .. import seeding
+from .ar1 import Z_MAX, AR1Noise, lag1
 from .girder_net import (
     RIDGE,
     TRAIN_PHYSICS_SD,
@@ -28,13 +37,24 @@ from .girder_net import (
     pieces,
 )
 from .lastlayer import MIN_PSEUDO_SD, PDE_SD_FACTOR, WEIGHT_PRIOR_FACTOR
+from .lastlayer_algebra import _log_cosh, _pieces, log_prior_z
 
 
 class GirderLastLayer:
-    """log p(y | phi, sigma) with the output layer (c, c_E) integrated out exactly (`uq.girder_pinn`'s
-    docstring), for a trained network on fixed points."""
+    """log p(y | phi, sigma[, rho]) with the output layer (c, c_E) integrated out exactly (`uq.girder_pinn`'s
+    docstring), for a trained network on fixed points.
 
-    def __init__(self, problem: GirderProblem, fit: GirderFit, settings: GirderNetSettings, seed):
+    The parameter vector z of `log_post`, `map` and the samplers is (phi, log sigma), and with AR(1) noise
+    (`noise`) (phi, log sigma, zeta), rho = tanh(zeta) (module docstring); `dim` is its length."""
+
+    def __init__(
+        self,
+        problem: GirderProblem,
+        fit: GirderFit,
+        settings: GirderNetSettings,
+        seed,
+        noise: AR1Noise | None = None,
+    ):
         self.problem = problem
         gen = torch.Generator().manual_seed(seeding.int_seed(seed))
         self.pts = Points.draw(settings, gen)
@@ -43,6 +63,19 @@ class GirderLastLayer:
         # pseudo-sds from the fit's own residuals at its phi (a function of the fit, stated not tuned)
         self.s_f, self.s_b, self.s_i, self.s_w, self.c_fit = self._scales(fit.phi)
         self.n = problem.y.size
+        self.phi_fit = np.asarray(fit.phi, float)
+        self.ar1 = noise
+        self.dim = problem.dim + 1 + (noise is not None)
+        if noise is not None:
+            if noise.n != self.n:
+                raise ValueError(f"the AR(1) series cover {noise.n} points, the data {self.n}")
+            ix = lambda a: torch.as_tensor(a, dtype=torch.long)  # noqa: E731
+            self._f, self._c, self._p = ix(noise.first), ix(noise.cur), ix(noise.prev)
+            D, y = self.P.Phi_d, torch.as_tensor(problem.y, dtype=torch.float64)
+            rows = lambda X: (X[self._f], X[self._c], X[self._p])  # noqa: E731
+            self._ar_dd = _pieces(*rows(D), *rows(D))
+            self._ar_dy = _pieces(*rows(D), *rows(y))
+            self._ar_yy = _pieces(*rows(y), *rows(y))
 
     def _scales(self, phi: np.ndarray):
         pr, P = self.problem, self.P
@@ -71,46 +104,111 @@ class GirderLastLayer:
     def scales(self, sigma) -> Scales_:
         return Scales_(sigma, self.s_f, self.s_b, self.s_i, self.s_w)
 
-    def log_marginal(self, phi: torch.Tensor, log_sigma: torch.Tensor) -> torch.Tensor:
-        """log p(y | phi, sigma) up to a constant independent of both (differentiable).
+    # ---- AR(1) noise -----------------------------------------------------------------------------------
+    def zeta_start(self) -> float:
+        """A start for zeta = atanh rho: the fit residuals' lag-1 autocorrelation along the noise series
+        (held inside |rho| <= 0.95)."""
+        phit = torch.as_tensor(self.phi_fit)
+        with torch.no_grad():
+            E = enrichment_column(self.problem, phit)
+            c = self.c_fit
+            r = (torch.as_tensor(self.problem.y) - self.P.Phi_d @ c[:-1] - c[-1] * E).numpy()
+        return math.atanh(min(max(lag1(self.ar1.series, r), -0.95), 0.95))
+
+    def _whiten(self, X: torch.Tensor, zeta: torch.Tensor) -> torch.Tensor:
+        """Rows of X (n, ...) whitened along the noise series (differentiable in zeta)."""
+        rho, c = torch.tanh(zeta), torch.cosh(zeta)
+        return X.index_copy(0, self._c, (X[self._c] - rho * X[self._p]) * c)
+
+    def _white_pieces(self, zeta: torch.Tensor):
+        """`Pieces` with the data's Gram products whitened at rho = tanh(zeta) (the physics rows unchanged)."""
+        rho, c2 = torch.tanh(zeta), torch.cosh(zeta) ** 2
+        dd, dy, yy = (
+            a + c2 * (b - rho * x + rho**2 * d)
+            for a, b, x, d in (self._ar_dd, self._ar_dy, self._ar_yy)
+        )
+        return dataclasses.replace(
+            self.P, dd=dd, dy=dy, yy=yy, Phi_d=self._whiten(self.P.Phi_d, zeta)
+        )
+
+    def _data(self, phi: torch.Tensor, sigma, zeta):
+        """The data rows' normal equations (A_d, g_d, k_d) at phi (`data_terms`), whitened with AR(1) noise."""
+        E = enrichment_column(self.problem, phi)
+        if zeta is None:
+            return data_terms(self.problem, self.P, E, sigma)
+        y = self._whiten(torch.as_tensor(self.problem.y, dtype=torch.float64), zeta)
+        P = self._white_pieces(zeta)
+        return data_terms(self.problem, P, self._whiten(E, zeta), sigma, y, P.dy, P.yy)
+
+    def split(self, z):
+        """(phi, log sigma, zeta or None) of a parameter vector z (`dim`,) or a batch (W, `dim`)."""
+        k = self.problem.dim
+        zeta = z[..., k + 1] if self.ar1 is not None else None
+        return z[..., :k], z[..., k], zeta
+
+    def inside(self, z: np.ndarray) -> bool:
+        """Is z inside the prior's support (phi's, and |rho| <= `ar1.RHO_MAX`)?"""
+        phi, _, zeta = self.split(np.asarray(z, float))
+        return self.problem.inside(phi) and (zeta is None or abs(float(zeta)) <= Z_MAX)
+
+    def start(self, phi: np.ndarray) -> np.ndarray:
+        """A starting z at phi: sigma at its mode there (and zeta at the fit residuals' lag-1 value)."""
+        if self.ar1 is None:
+            return np.r_[phi, self.sigma_mode(phi)]
+        zeta = self.zeta_start()
+        return np.r_[phi, self.sigma_mode(phi, zeta), zeta]
+
+    def log_marginal(self, phi: torch.Tensor, log_sigma: torch.Tensor, zeta=None) -> torch.Tensor:
+        """log p(y | phi, sigma[, rho = tanh zeta]) up to a constant independent of them (differentiable).
 
         The physics rows and the weight prior act as the output layer's prior given phi, normalised:
         c ~ N(mu_p, A_p^-1). Counted as observations instead, the normaliser's log|A_p(phi)| / 2 (the PDE
         rows' precision grows as EI_s^2) and the physics' own minimum would inform phi through the network's
         approximation error rather than the data (`uq.lastlayer` docstring); so
-        y ~ N(D mu_p, sigma^2 I + D A_p^-1 D'), computed through A = A_p + D'D / sigma^2."""
+        y ~ N(D mu_p, sigma^2 I + D A_p^-1 D'), computed through A = A_p + D'D / sigma^2. With AR(1) noise
+        the data rows are whitened at rho and the whitening's Jacobian is added (module docstring)."""
         pr = self.problem
+        if zeta is not None and not torch.is_tensor(zeta):
+            zeta = torch.tensor(float(zeta), dtype=torch.float64)
         sigma = torch.exp(log_sigma)
         sc = self.scales(sigma)
-        E = enrichment_column(pr, phi)
         Ap, gp, _ = physics(pr, self.P, phi, sc)
-        Ad, gd, kd = data_terms(pr, self.P, E, sigma)
+        Ad, gd, kd = self._data(phi, sigma, zeta)
         mu, Lp = _solve(Ap, gp)
         b = gp + gd
         c, L = _solve(Ap + Ad, b)
-        return (
+        out = (
             -0.5 * (kd + mu @ gp - b @ c)
             - torch.log(torch.diagonal(L)).sum()
             + torch.log(torch.diagonal(Lp)).sum()
             - self.n * log_sigma
         )
+        if zeta is not None:  # the whitening's Jacobian, -((n - m)/2) log(1 - rho^2)
+            out = out + (self.ar1.n - self.ar1.m) * _log_cosh(zeta)
+        return out
 
     def log_post(self, z: torch.Tensor) -> torch.Tensor:
-        """log posterior of z = (phi, log sigma): marginal + prior (log-uniform sigma)."""
-        phi = z[:-1]
-        return self.log_marginal(phi, z[-1]) + self.problem.log_prior(phi)
+        """log posterior of z = (phi, log sigma[, zeta]): marginal + prior (log-uniform sigma, uniform rho)."""
+        phi, ls, zeta = self.split(z)
+        out = self.log_marginal(phi, ls, zeta) + self.problem.log_prior(phi)
+        if zeta is not None:
+            out = out + log_prior_z(zeta)
+        return out
 
     @torch.no_grad()
     def log_post_many(self, Z: np.ndarray) -> np.ndarray:
-        """`log_post` at many points Z (W, dim + 1) at once (no gradients); -inf outside the prior's support."""
+        """`log_post` at many points Z (W, `dim`) at once (no gradients); -inf outside the prior's support."""
         pr, P = self.problem, self.P
         Z = np.atleast_2d(Z)
         out = np.full(Z.shape[0], -np.inf)
-        ok = pr.post.inside(Z[:, :-1])
+        phi_np, _, zeta_np = self.split(Z)
+        ok = pr.post.inside(phi_np)
+        if zeta_np is not None:
+            ok &= np.abs(zeta_np) <= Z_MAX
         if not ok.any():
             return out
         z = torch.as_tensor(Z[ok])
-        phi, ls = z[:, :-1], z[:, -1]
+        phi, ls, zeta = self.split(z)
         W = phi.shape[0]
         sig2 = torch.exp(2 * ls)
         E = torch.as_tensor(pr.enrichment(Z[ok, : pr.n_phys]))  # (W, n)
@@ -130,14 +228,30 @@ class GirderLastLayer:
         Ap[:, :D, :D] += Gb / self.s_b**2 + P.ic / self.s_i**2
         Ap = Ap + torch.eye(D + 1, dtype=torch.float64) / self.s_w**2
         y = torch.as_tensor(pr.y)
-        dE = E @ P.Phi_d  # (W, D)
+        if zeta is None:
+            dd, dy, yy = P.dd, P.dy.expand(W, D), P.yy
+            dE, EE, Ey = E @ P.Phi_d, (E * E).sum(1), E @ y  # (W, D), (W,), (W,)
+        else:  # whitened at each point's own rho (module docstring)
+            rho, c2 = torch.tanh(zeta), torch.cosh(zeta) ** 2
+            r, k = rho[:, None], c2[:, None]
+            (a, b, x, d), (a1, b1, x1, d1), (a0, b0, x0, d0) = self._ar_dd, self._ar_dy, self._ar_yy
+            dd = a + k[..., None] * (b - r[..., None] * x + (r**2)[..., None] * d)  # (W, D, D)
+            dy = a1 + k * (b1 - r * x1 + r**2 * d1)  # (W, D)
+            yy = a0 + c2 * (b0 - rho * x0 + rho**2 * d0)  # (W,)
+            f_, c_, p_ = self._f, self._c, self._p
+            Phi = P.Phi_d
+            # the enrichment's and the data's non-first rows, x_k - rho x_(k-1) (times cosh^2 below)
+            We, Wy = E[:, c_] - r * E[:, p_], y[c_] - r * y[p_]  # (W, n - m)
+            dE = E[:, f_] @ Phi[f_] + k * (We @ Phi[c_] - r * (We @ Phi[p_]))
+            EE = (E[:, f_] ** 2).sum(1) + c2 * (We * We).sum(1)
+            Ey = E[:, f_] @ y[f_] + c2 * (We * Wy).sum(1)
         Ad = torch.zeros_like(Ap)
-        Ad[:, :D, :D] = P.dd
+        Ad[:, :D, :D] = dd
         Ad[:, :D, D] = Ad[:, D, :D] = dE
-        Ad[:, D, D] = (E * E).sum(1)
+        Ad[:, D, D] = EE
         Ad = Ad / sig2[:, None, None]
-        gd = torch.cat([P.dy.expand(W, D), (E @ y)[:, None]], 1) / sig2[:, None]
-        kd = P.yy / sig2
+        gd = torch.cat([dy, Ey[:, None]], 1) / sig2[:, None]
+        kd = yy / sig2
 
         def chol_solve(A, g):
             d = A.diagonal(dim1=1, dim2=2).clamp_min(1e-300)
@@ -153,7 +267,9 @@ class GirderLastLayer:
             + torch.log(Lp.diagonal(dim1=1, dim2=2)).sum(1)
             - self.n * ls
         )
-        lp = pr.post.log_prior(Z[ok, :-1])
+        if zeta is not None:  # the whitening's Jacobian and rho's uniform prior
+            lm = lm + (self.ar1.n - self.ar1.m) * _log_cosh(zeta) + log_prior_z(zeta)
+        lp = pr.post.log_prior(phi_np[ok])
         val = lm.numpy() + lp
         val[(i1 != 0).numpy() | (i2 != 0).numpy() | ~np.isfinite(val)] = -np.inf
         out[ok] = val
@@ -165,7 +281,7 @@ class GirderLastLayer:
 
         def closure():
             opt.zero_grad()
-            if not self.problem.inside(z.detach().numpy()[:-1]):
+            if not self.inside(z.detach().numpy()):
                 return torch.as_tensor(math.inf, dtype=torch.float64)
             v = -self.log_post(z)
             v.backward()
@@ -199,11 +315,13 @@ class GirderLastLayer:
         lam = np.maximum(lam, floor)
         return (V / lam) @ V.T
 
-    def sigma_mode(self, phi: np.ndarray) -> float:
-        """The log sigma maximising the marginal at phi (golden section on log sigma)."""
+    def sigma_mode(self, phi: np.ndarray, zeta: float | None = None) -> float:
+        """The log sigma maximising the marginal at phi (and zeta, with AR(1) noise; golden section)."""
         lo, hi = math.log(self.problem.sigma0) - 3.0, math.log(self.problem.sigma0) + 3.0
         phit = torch.as_tensor(phi)
-        f = lambda s: float(self.log_marginal(phit, torch.as_tensor(s, dtype=torch.float64)))  # noqa: E731
+        T = lambda v: torch.as_tensor(v, dtype=torch.float64)  # noqa: E731
+        zt = None if zeta is None else T(zeta)
+        f = lambda s: float(self.log_marginal(phit, T(s), zt))  # noqa: E731
         r = (math.sqrt(5) - 1) / 2
         a, b = lo, hi
         c, d = b - r * (b - a), a + r * (b - a)

@@ -52,8 +52,12 @@ posterior of log EI is far from Gaussian (the segments next to the supports are 
 the middle ones 0.4x the reference's), and uncorrected randomise-then-optimise draws on the last layer gave
 sds 0.56-0.71x the reference's (smoke profile, damaged Exeter girder at 30 dB, 20 draws per member).
 
-What this does not do: AR(1) noise on a girder (refused, exit 2), damping in the network's PDE rows (the
-enrichment carries the girder's modal damping; the correction N is undamped).
+AR(1) noise (`[model] noise = "ar1"`): the network is trained as for white noise (a point fit), and its last
+layer whitens the data rows along each sensor's series at the coefficient rho (`uq.girder_lastlayer`), so
+both samplers draw (phi, log sigma, atanh rho) from the exact last-layer posterior, as the reference does.
+
+What this does not do: damping in the network's PDE rows (the enrichment carries the girder's modal damping;
+the correction N is undamped).
 """
 
 from __future__ import annotations
@@ -72,6 +76,7 @@ from ..config import Config
 from ..data.measurements import Measurements
 from ..errors import InputError
 from ..threads import one_blas_thread, torch_threads
+from .ar1 import AR1Noise
 from .girder_lastlayer import GirderLastLayer
 from .girder_net import (
     GirderNetSettings,
@@ -100,14 +105,14 @@ def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
 
 def check_girder(cfg: Config, data: Measurements, display: str) -> None:
     """Refuse what the girder PINN does not describe (exit 2, naming the field)."""
-    if cfg.model.noise != "iid":
-        raise InputError(
-            "model.noise",
-            cfg.model.noise,
-            f"'iid' for the {display} on a girder with EI per segment, springs or an uncertain load "
-            "(its AR(1) likelihood is for the uniform, pinned girder); --method modal has it",
-        )
+    if cfg.model.noise not in ("iid", "ar1"):
+        raise InputError("model.noise", cfg.model.noise, f"'iid' or 'ar1' for the {display}")
     check_segments(cfg, data)
+
+
+def _noise(cfg: Config, data: Measurements) -> AR1Noise | None:
+    """The AR(1) series of the data when the analysis model's noise is AR(1), else None (white noise)."""
+    return AR1Noise.of(data) if cfg.model.noise == "ar1" else None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -116,20 +121,23 @@ def check_girder(cfg: Config, data: Measurements, display: str) -> None:
 
 def _posterior(
     problem: GirderProblem,
-    phi: np.ndarray,
-    sigma: np.ndarray,
+    ll: GirderLastLayer,
+    z: np.ndarray,
     method: str,
     diagnostics: dict,
     info: dict,
     runtime: float,
 ) -> GirderReference:
-    """The pipeline's Posterior of draws phi (chain, draw, dim), sigma (chain, draw)."""
+    """The pipeline's Posterior of draws z (chain, draw, `ll.dim`): phi, log sigma (and atanh rho)."""
     lay = problem.layout
+    phi, log_sigma, zeta = ll.split(z)
+    sigma = np.exp(log_sigma)
     gp = GirderPosterior(
         EI_segments=np.exp(phi[..., : lay.n_segments]),
         rotational_stiffness=np.exp(phi[..., lay.springs]) if lay.infer_springs else None,
         load_factor=np.exp(phi[..., lay.load]) if lay.infer_load else None,
         sigma=sigma,
+        noise_ar1=None if zeta is None else np.tanh(zeta),
         edges=np.linspace(0.0, problem.L, lay.n_segments + 1),
         EI_nominal=problem.nominal,
         diagnostics=diagnostics,
@@ -155,7 +163,7 @@ def _info(problem: GirderProblem, settings: GirderNetSettings, ll: GirderLastLay
             "EI_segments": problem.S,
             "supports": problem.cfg.model.supports,
             "load_factor": "inferred" if problem.infer_load else "fixed at 1",
-            "noise": "iid",
+            "noise": problem.cfg.model.noise,
         },
         "network": (
             f"{settings.depth} x {settings.width} tanh, enriched with the girder's FE modal response "
@@ -231,12 +239,13 @@ def girder_ensemble_posterior(
     t0 = time.perf_counter()
     settings = GirderNetSettings.for_profile(profile)
     problem = GirderProblem(data, cfg)
+    noise = _noise(cfg, data)
     draws, member_info = [], []
     for m in range(members):
         fs = member_fit_seed(seed, m)
         fit = train_fit(problem, settings, fs, progress)
-        ll = GirderLastLayer(problem, fit, settings, seeding.stream(fs, "collocation"))
-        zmap = ll.map(np.r_[fit.phi, ll.sigma_mode(fit.phi)])
+        ll = GirderLastLayer(problem, fit, settings, seeding.stream(fs, "collocation"), noise)
+        zmap = ll.map(ll.start(fit.phi))
         Z, is_info = importance_sample(
             ll, zmap, ll.covariance(zmap), seeding.rng(fs, "noise"), settings
         )
@@ -245,7 +254,7 @@ def girder_ensemble_posterior(
             {
                 "EI_segments": np.exp(Z[:, : problem.S].mean(0)).tolist(),
                 "log_EI_sd": Z[:, : problem.S].std(0, ddof=1).tolist(),
-                "sigma": float(np.exp(np.median(Z[:, -1]))),
+                "sigma": float(np.exp(np.median(ll.split(Z)[1]))),
                 "train_s": fit.seconds,
                 **is_info,
             }
@@ -272,8 +281,8 @@ def girder_ensemble_posterior(
     info = _info(problem, settings, None) | {"members": member_info}
     return _posterior(
         problem,
-        th[..., :-1].reshape(1, -1, problem.dim),
-        np.exp(th[..., -1]).reshape(1, -1),
+        ll,
+        th.reshape(1, -1, ll.dim),
         "ensemble",
         diagnostics,
         info,
@@ -307,14 +316,15 @@ def girder_bpinn_posterior(
     problem = GirderProblem(data, cfg)
     fs = fit_seed if fit_seed is not None else member_fit_seed(seeding.stream(seed, "ensemble"), 0)
     fit = train_fit(problem, settings, fs, progress)
-    ll = GirderLastLayer(problem, fit, settings, seeding.stream(fs, "collocation"))
-    z0 = np.r_[fit.phi, ll.sigma_mode(fit.phi)]
-    zmap = ll.map(z0)
+    ll = GirderLastLayer(
+        problem, fit, settings, seeding.stream(fs, "collocation"), _noise(cfg, data)
+    )
+    zmap = ll.map(ll.start(fit.phi))
     Lc = np.linalg.cholesky(ll.covariance(zmap))
 
     def pot(params):
         z = params["z"]
-        if not problem.inside(z.detach().numpy()[:-1]):
+        if not ll.inside(z.detach().numpy()):
             return torch.as_tensor(math.inf, dtype=torch.float64) + (z * 0).sum()
         return -ll.log_post(z)
 
@@ -334,8 +344,8 @@ def girder_bpinn_posterior(
                 progress=progress,
             )
         )
-    z = np.stack([W.z_draws(ch.samples["u"]) for ch in chains])  # (chain, draw, dim + 1)
-    post = _posterior(problem, z[..., :-1], np.exp(z[..., -1]), "bpinn", {}, {}, 0.0)
+    z = np.stack([W.z_draws(ch.samples["u"]) for ch in chains])  # (chain, draw, ll.dim)
+    post = _posterior(problem, ll, z, "bpinn", {}, {}, 0.0)
     per = {name: mcmc_diagnostics(d) for name, d in post.girder.draws().items()}
     health = nuts_health(chains)
     diag = {
