@@ -193,6 +193,30 @@ def test_methods_refuse_what_they_cannot_describe_before_anything_runs(
     assert not out.exists() or not any(out.iterdir())
 
 
+@pytest.mark.parametrize("method", ["ensemble", "bpinn"])
+@pytest.mark.parametrize(
+    ("extra", "field"),
+    [
+        ("[vehicle]\nspeed_sd = 0.01\n", "vehicle.speed_sd"),
+        ("[vehicle]\nentry_time = 0.5\n", "vehicle.entry_time"),
+        ('[model]\ndamping = "inferred"\n', "model.damping"),
+    ],
+)
+def test_girder_pinns_refuse_a_crossing_to_infer(tmp_path, method, extra, field):
+    """A PINN method on a girder with EI per segment takes the crossing as stated: a speed, an entry time or
+    damping declared uncertain is refused (exit 2, one line naming the field, nothing written), not silently
+    analysed with the stated values (before this check the ensemble ran and reported an interval)."""
+    text = "[model]\nEI_segments = 2\n" + extra.replace("[model]\n", "")
+    cfg = _toml(tmp_path, text)
+    out = tmp_path / "out"
+    r = _cli("run", "--snr", "30", "--method", method, "--config", str(cfg), "--out", str(out),
+             "--profile", "smoke", "--quiet")  # fmt: skip
+    assert r.returncode == 2, r.stderr[-2000:]
+    assert field in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_too_many_segments_for_the_data_exit_2(tmp_path):
     cfg = _toml(tmp_path, "[model]\nEI_segments = 30\n[data]\nn_points = 100\n")
     out = tmp_path / "out"

@@ -104,7 +104,12 @@ def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
 
 
 def check_girder(cfg: Config, data: Measurements, display: str) -> None:
-    """Refuse what the girder PINN does not describe (exit 2, naming the field)."""
+    """Refuse what the girder PINN does not describe (exit 2, naming the field): what a crossing leaves to
+    infer (a speed, an entry time, damping, fluctuating forces, several crossings: it takes the crossing as
+    stated), an EI field, and too many segments for the data."""
+    from ..crossings.checks import refuse_crossings
+
+    refuse_crossings(cfg, data, display)
     if cfg.model.noise not in ("iid", "ar1"):
         raise InputError("model.noise", cfg.model.noise, f"'iid' or 'ar1' for the {display}")
     check_segments(cfg, data)
