@@ -217,6 +217,18 @@ def test_girder_pinns_refuse_a_crossing_to_infer(tmp_path, method, extra, field)
     assert not out.exists() or not any(out.iterdir())
 
 
+def test_every_example_configuration_is_accepted_by_every_default_method():
+    """Each TOML in examples/ resolves, and the modal reference, the deep ensemble and the last-layer B-PINN
+    accept it (their checks run before anything is fitted); a key a method cannot describe would exit 2."""
+    from bayespinn import methods
+
+    for path in sorted((REPO / "examples").glob("*.toml")):
+        cfg = resolve("deflection", str(path))
+        data = simulate(cfg, 30.0, seed=0)
+        for name in ("modal", "ensemble", "bpinn"):
+            methods.build(name).check(data, cfg)  # raises InputError if refused
+
+
 def test_too_many_segments_for_the_data_exit_2(tmp_path):
     cfg = _toml(tmp_path, "[model]\nEI_segments = 30\n[data]\nn_points = 100\n")
     out = tmp_path / "out"
