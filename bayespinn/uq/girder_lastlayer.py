@@ -37,7 +37,7 @@ from .girder_net import (
     pieces,
 )
 from .lastlayer import MIN_PSEUDO_SD, PDE_SD_FACTOR, WEIGHT_PRIOR_FACTOR
-from .lastlayer_algebra import _log_cosh, _pieces, log_prior_z
+from .lastlayer_algebra import _log_cosh, _pieces, combine_pieces, log_prior_z, whiten_rows
 
 
 class GirderLastLayer:
@@ -117,16 +117,11 @@ class GirderLastLayer:
 
     def _whiten(self, X: torch.Tensor, zeta: torch.Tensor) -> torch.Tensor:
         """Rows of X (n, ...) whitened along the noise series (differentiable in zeta)."""
-        rho, c = torch.tanh(zeta), torch.cosh(zeta)
-        return X.index_copy(0, self._c, (X[self._c] - rho * X[self._p]) * c)
+        return whiten_rows(X, self._c, self._p, zeta)
 
     def _white_pieces(self, zeta: torch.Tensor):
         """`Pieces` with the data's Gram products whitened at rho = tanh(zeta) (the physics rows unchanged)."""
-        rho, c2 = torch.tanh(zeta), torch.cosh(zeta) ** 2
-        dd, dy, yy = (
-            a + c2 * (b - rho * x + rho**2 * d)
-            for a, b, x, d in (self._ar_dd, self._ar_dy, self._ar_yy)
-        )
+        dd, dy, yy = (combine_pieces(p, zeta) for p in (self._ar_dd, self._ar_dy, self._ar_yy))
         return dataclasses.replace(
             self.P, dd=dd, dy=dy, yy=yy, Phi_d=self._whiten(self.P.Phi_d, zeta)
         )
@@ -234,10 +229,9 @@ class GirderLastLayer:
         else:  # whitened at each point's own rho (module docstring)
             rho, c2 = torch.tanh(zeta), torch.cosh(zeta) ** 2
             r, k = rho[:, None], c2[:, None]
-            (a, b, x, d), (a1, b1, x1, d1), (a0, b0, x0, d0) = self._ar_dd, self._ar_dy, self._ar_yy
-            dd = a + k[..., None] * (b - r[..., None] * x + (r**2)[..., None] * d)  # (W, D, D)
-            dy = a1 + k * (b1 - r * x1 + r**2 * d1)  # (W, D)
-            yy = a0 + c2 * (b0 - rho * x0 + rho**2 * d0)  # (W,)
+            dd = combine_pieces(self._ar_dd, zeta[:, None, None])  # (W, D, D)
+            dy = combine_pieces(self._ar_dy, zeta[:, None])  # (W, D)
+            yy = combine_pieces(self._ar_yy, zeta)  # (W,)
             f_, c_, p_ = self._f, self._c, self._p
             Phi = P.Phi_d
             # the enrichment's and the data's non-first rows, x_k - rho x_(k-1) (times cosh^2 below)

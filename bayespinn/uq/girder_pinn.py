@@ -77,6 +77,7 @@ from ..data.measurements import Measurements
 from ..errors import InputError
 from ..threads import one_blas_thread, torch_threads
 from .ar1 import AR1Noise
+from .ensemble_pool import MAX_SCATTER_RATIO
 from .girder_lastlayer import GirderLastLayer
 from .girder_net import (
     GirderNetSettings,
@@ -94,8 +95,6 @@ log = logging.getLogger(__name__)
 #: freedom, the first proposal's scale on the Laplace covariance (the posterior of a segment next to a
 #: support is skewed and up to twice the Laplace width), and the later proposals' on the weighted covariance
 IS_STAGES, IS_DOF, IS_INFLATE, IS_COV_SCALE = 4, 5.0, 2.0, 1.2
-#: members scattering more than this many times their own sd are flagged (as `uq.ensemble`)
-MAX_SCATTER_RATIO = 3.0
 
 
 def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
@@ -272,7 +271,7 @@ def girder_ensemble_posterior(
             is_info["ess"],
         )
     th = np.stack(draws)  # (member, draw, dim + 1)
-    # members' scatter of their means against their own widths (as `uq.ensemble.MAX_SCATTER_RATIO`)
+    # members' scatter of their means against their own widths (the uniform girder's `MAX_SCATTER_RATIO`)
     means, sds = th.mean(1), th.std(1, ddof=1)
     ratio = float(np.max(means.std(0, ddof=1) / np.mean(sds, 0))) if members > 1 else 0.0
     min_ess = min(i["ess"] for i in member_info)

@@ -84,7 +84,15 @@ from ..pinn.network import PINN
 from ..pinn.problem import Problem
 from ..pinn.taylor import Jet
 from .ar1 import AR1Noise, lag1
-from .lastlayer_algebra import _cholesky, _log_cosh, _pieces, feature_jet, log_prior_z
+from .lastlayer_algebra import (
+    _cholesky,
+    _log_cosh,
+    _pieces,
+    combine_pieces,
+    feature_jet,
+    log_prior_z,
+    whiten_rows,
+)
 from .lastlayer_posterior import (
     GRID_DOUBLINGS,
     GRID_EDGE,
@@ -371,18 +379,13 @@ class LastLayer(LastLayerPosterior):
     def _whiten(self, X: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
         """Rows of X (n, ...) whitened along the noise series: x_k -> (x_k - rho x_(k-1)) / sqrt(1 - rho^2)
         for every non-first sample (differentiable in z)."""
-        rho, c = torch.tanh(z), torch.cosh(z)
-        return X.index_copy(0, self._cur, (X[self._cur] - rho * X[self._prev]) * c)
+        return whiten_rows(X, self._cur, self._prev, z)
 
     def _data_gram(self, z: torch.Tensor | None):
         """(D'PD, D'Py, y'Py) of the fixed columns, P the noise's precision times sigma^2 (I for white noise)."""
         if z is None:
             return self.G_dd, self.g_dy, self.yy
-        rho, c2 = torch.tanh(z), torch.cosh(z) ** 2
-        return tuple(
-            a + c2 * (b - rho * x + rho**2 * d)
-            for a, b, x, d in (self._ar_G, self._ar_g, self._ar_yy)
-        )
+        return tuple(combine_pieces(p, z) for p in (self._ar_G, self._ar_g, self._ar_yy))
 
     def _vary_block(self, log_theta: torch.Tensor, z: torch.Tensor | None):
         """(Df'P Dv, Dv'P Dv, Dv'P y, Cv) of the varying first mode at theta (P: the noise's precision times

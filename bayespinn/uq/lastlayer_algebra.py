@@ -67,6 +67,24 @@ def _pieces(Xf, Xc, Xp, Yf, Yc, Yp) -> tuple:
     return (_t(Xf) @ Yf, _t(Xc) @ Yc, _t(Xc) @ Yp + _t(Xp) @ Yc, _t(Xp) @ Yp)
 
 
+def combine_pieces(pieces: tuple, z: torch.Tensor) -> torch.Tensor:
+    """X'P(rho)Y from its four `_pieces` at rho = tanh z: Xf'Yf + (Xc'Yc - rho (Xc'Yp + Xp'Yc) + rho^2 Xp'Yp)
+    / (1 - rho^2) (differentiable in z)."""
+    a, b, x, d = pieces
+    rho, c2 = torch.tanh(z), torch.cosh(z) ** 2
+    return a + c2 * (b - rho * x + rho**2 * d)
+
+
+def whiten_rows(
+    X: torch.Tensor, cur: torch.Tensor, prev: torch.Tensor, z: torch.Tensor
+) -> torch.Tensor:
+    """Rows of X (n, ...) whitened along AR(1) noise series: x_k -> (x_k - rho x_(k-1)) / sqrt(1 - rho^2) for
+    every non-first sample k (`cur`, its predecessor `prev`: `ar1.AR1Noise`), rho = tanh z; differentiable
+    in z. The torch twin of `ar1.AR1Noise.whiten`, for both last layers."""
+    rho, c = torch.tanh(z), torch.cosh(z)
+    return X.index_copy(0, cur, (X[cur] - rho * X[prev]) * c)
+
+
 def _log_cosh(z: torch.Tensor) -> torch.Tensor:
     a = z.abs()
     return a + torch.log1p(torch.exp(-2.0 * a)) - math.log(2.0)
