@@ -107,6 +107,7 @@ class LastLayerBPINN(BPINN):
             # the deep ensemble's member 0 network on the same data (same seed, same training)
             fit_seed=member_fit_seed(ensemble_seed(seed), 0),
             progress=self.progress,
+            executor=self.executor,
         )
 
     def _sampler(self):

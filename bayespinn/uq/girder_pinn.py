@@ -294,6 +294,20 @@ def girder_ensemble_posterior(
     )
 
 
+class GirderPotential:
+    """-log posterior of a girder last layer at params["z"], +inf outside the prior's support: the potential
+    of the B-PINN's NUTS chains (a class, so a chain can be a task of a process pool)."""
+
+    def __init__(self, ll: GirderLastLayer):
+        self.ll = ll
+
+    def __call__(self, params: dict) -> torch.Tensor:
+        z = params["z"]
+        if not self.ll.inside(z.detach().numpy()):
+            return torch.as_tensor(math.inf, dtype=torch.float64) + (z * 0).sum()
+        return -self.ll.log_post(z)
+
+
 @_one_thread
 def girder_bpinn_posterior(
     data: Measurements,
@@ -303,17 +317,13 @@ def girder_bpinn_posterior(
     profile: str = "fast",
     fit_seed=None,
     progress: bool = False,
+    executor=None,
 ) -> GirderReference:
-    """Last-layer B-PINN on a real girder: NUTS on (phi, log sigma), output layer integrated out."""
-    from .nuts import (
-        NUTSSettings,
-        Whitened,
-        nuts_health,
-        problems,
-        run_nuts,
-        sample_stats,
-        valid_start,
-    )
+    """Last-layer B-PINN on a real girder: NUTS on (phi, log sigma[, atanh rho]), output layer integrated out;
+    the chains run as tasks of `executor` (the uniform girder's runner, `uq.bpinn.nuts`: each chain from a
+    dispersed start on its own seed, single-threaded, so the draws do not depend on the executor)."""
+    from .bpinn import nuts as run_chains
+    from .nuts import NUTSSettings, nuts_health, problems, sample_stats
 
     t0 = time.perf_counter()
     settings = GirderNetSettings.for_profile(profile)
@@ -325,30 +335,8 @@ def girder_bpinn_posterior(
     )
     zmap = ll.map(ll.start(fit.phi))
     Lc = np.linalg.cholesky(ll.covariance(zmap))
-
-    def pot(params):
-        z = params["z"]
-        if not ll.inside(z.detach().numpy()):
-            return torch.as_tensor(math.inf, dtype=torch.float64) + (z * 0).sum()
-        return -ll.log_post(z)
-
-    W = Whitened(pot, zmap, Lc)
     ns = NUTSSettings.for_profile(profile)
-    chains = []
-    rng = seeding.rng(seed, "init")
-    for c in range(ns.chains):
-        u0 = valid_start(W, torch.as_tensor(rng.standard_normal(zmap.size)))
-        chains.append(
-            run_nuts(
-                W,
-                {"u": u0},
-                warmup=ns.warmup,
-                samples=ns.samples,
-                seed=seeding.child(seed, "pyro", c),
-                progress=progress,
-            )
-        )
-    z = np.stack([W.z_draws(ch.samples["u"]) for ch in chains])  # (chain, draw, ll.dim)
+    z, chains = run_chains(GirderPotential(ll), zmap, Lc, ns, seed, progress, executor)
     post = _posterior(problem, ll, z, "bpinn", {}, {}, 0.0)
     per = {name: mcmc_diagnostics(d) for name, d in post.girder.draws().items()}
     health = nuts_health(chains)
