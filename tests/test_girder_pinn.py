@@ -252,6 +252,22 @@ def test_pinn_methods_carry_ar1_noise_on_a_damaged_girder(ar1_damaged):
     assert np.all(ratio < 0.67), ratio
 
 
+def test_girder_pinns_do_not_depend_on_the_executor(damaged):
+    """The girder ensemble's members and the girder B-PINN's chains are executor tasks: one worker and two give
+    the same draws (each task single-threaded on its own seed)."""
+    from bayespinn.executor import Executor
+
+    cfg, data = damaged
+    kw = dict(seed=np.random.SeedSequence(5), members=2, profile="smoke")
+    a = G.girder_ensemble_posterior(data, cfg, executor=Executor(workers=1), **kw)
+    b = G.girder_ensemble_posterior(data, cfg, executor=Executor(workers=2), **kw)
+    assert np.array_equal(a.girder.EI_segments, b.girder.EI_segments)
+    kw = dict(seed=np.random.SeedSequence(6), profile="smoke")
+    a = G.girder_bpinn_posterior(data, cfg, executor=Executor(workers=1), **kw)
+    b = G.girder_bpinn_posterior(data, cfg, executor=Executor(workers=2), **kw)
+    assert np.array_equal(a.girder.EI_segments, b.girder.EI_segments)
+
+
 def test_cli_runs_the_pinn_methods_on_a_girder_with_springs_and_an_uncertain_load(tmp_path):
     """`bayespinn run --method ensemble,bpinn` with springs inferred: summary keys of the contract
     (rotational_stiffness [left, right], EI_segments with p_damaged), fit checks, report written."""

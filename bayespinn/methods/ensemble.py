@@ -86,6 +86,7 @@ class DeepEnsemble(Method):
                 members=s.members,
                 profile=s.profile,
                 progress=self.progress,
+                executor=self.executor,
             )
         return ensemble_posterior(
             data,

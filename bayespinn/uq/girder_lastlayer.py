@@ -40,6 +40,12 @@ from .lastlayer import MIN_PSEUDO_SD, PDE_SD_FACTOR, WEIGHT_PRIOR_FACTOR
 from .lastlayer_algebra import _log_cosh, _pieces, combine_pieces, log_prior_z, whiten_rows
 
 
+def split_z(z, k: int, ar1: bool):
+    """(phi, log sigma, zeta or None) of parameter vectors z (..., dim): phi's k entries, then log sigma, then
+    with AR(1) noise zeta = atanh rho."""
+    return z[..., :k], z[..., k], (z[..., k + 1] if ar1 else None)
+
+
 class GirderLastLayer:
     """log p(y | phi, sigma[, rho]) with the output layer (c, c_E) integrated out exactly (`uq.girder_pinn`'s
     docstring), for a trained network on fixed points.
@@ -137,9 +143,7 @@ class GirderLastLayer:
 
     def split(self, z):
         """(phi, log sigma, zeta or None) of a parameter vector z (`dim`,) or a batch (W, `dim`)."""
-        k = self.problem.dim
-        zeta = z[..., k + 1] if self.ar1 is not None else None
-        return z[..., :k], z[..., k], zeta
+        return split_z(z, self.problem.dim, self.ar1 is not None)
 
     def inside(self, z: np.ndarray) -> bool:
         """Is z inside the prior's support (phi's, and |rho| <= `ar1.RHO_MAX`)?"""

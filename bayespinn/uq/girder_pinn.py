@@ -66,6 +66,7 @@ import functools
 import logging
 import math
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -78,7 +79,7 @@ from ..errors import InputError
 from ..threads import one_blas_thread, torch_threads
 from .ar1 import AR1Noise
 from .ensemble_pool import MAX_SCATTER_RATIO
-from .girder_lastlayer import GirderLastLayer
+from .girder_lastlayer import GirderLastLayer, split_z
 from .girder_net import (
     GirderNetSettings,
     GirderProblem,
@@ -125,16 +126,16 @@ def _noise(cfg: Config, data: Measurements) -> AR1Noise | None:
 
 def _posterior(
     problem: GirderProblem,
-    ll: GirderLastLayer,
+    ar1: bool,
     z: np.ndarray,
     method: str,
     diagnostics: dict,
     info: dict,
     runtime: float,
 ) -> GirderReference:
-    """The pipeline's Posterior of draws z (chain, draw, `ll.dim`): phi, log sigma (and atanh rho)."""
+    """The pipeline's Posterior of draws z (chain, draw, dim): phi, log sigma (and atanh rho when `ar1`)."""
     lay = problem.layout
-    phi, log_sigma, zeta = ll.split(z)
+    phi, log_sigma, zeta = split_z(z, problem.dim, ar1)
     sigma = np.exp(log_sigma)
     gp = GirderPosterior(
         EI_segments=np.exp(phi[..., : lay.n_segments]),
@@ -227,6 +228,36 @@ def importance_sample(
     return Z[idx], {"ess": ess, "max_weight": float(w.max()), "samples": settings.is_samples}
 
 
+@dataclass(frozen=True)
+class _Member:
+    """One deep-ensemble member on a girder, an executor task: its result is a function of its fit seed."""
+
+    problem: GirderProblem
+    settings: GirderNetSettings
+    seed: object  # the member's fit seed (`member_fit_seed`)
+    noise: AR1Noise | None
+    progress: bool = False
+
+
+def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
+    """(draws of z (draw, dim), info) of one member: its network trained, its last-layer posterior sampled
+    by adaptive importance sampling."""
+    fit = train_fit(t.problem, t.settings, t.seed, t.progress)
+    ll = GirderLastLayer(t.problem, fit, t.settings, seeding.stream(t.seed, "collocation"), t.noise)
+    zmap = ll.map(ll.start(fit.phi))
+    Z, is_info = importance_sample(
+        ll, zmap, ll.covariance(zmap), seeding.rng(t.seed, "noise"), t.settings
+    )
+    S = t.problem.S
+    return Z, {
+        "EI_segments": np.exp(Z[:, :S].mean(0)).tolist(),
+        "log_EI_sd": Z[:, :S].std(0, ddof=1).tolist(),
+        "sigma": float(np.exp(np.median(ll.split(Z)[1]))),
+        "train_s": fit.seconds,
+        **is_info,
+    }
+
+
 @_one_thread
 def girder_ensemble_posterior(
     data: Measurements,
@@ -236,39 +267,33 @@ def girder_ensemble_posterior(
     members: int = 5,
     profile: str = "fast",
     progress: bool = False,
+    executor=None,
 ) -> GirderReference:
-    """Deep ensemble on a real girder: M networks from their own starts; each member's exact last-layer
-    posterior of (phi, log sigma) sampled by adaptive importance sampling; the members pooled in equal shares
-    (module docstring)."""
+    """Deep ensemble on a real girder: M networks from their own starts, as tasks of `executor` (default: the
+    local pool, one process per core); each member's exact last-layer posterior of (phi, log sigma[, atanh
+    rho]) sampled by adaptive importance sampling; the members pooled in equal shares (module docstring)."""
+    from ..executor import Executor, task_resources
+
     t0 = time.perf_counter()
     settings = GirderNetSettings.for_profile(profile)
     problem = GirderProblem(data, cfg)
     noise = _noise(cfg, data)
-    draws, member_info = [], []
-    for m in range(members):
-        fs = member_fit_seed(seed, m)
-        fit = train_fit(problem, settings, fs, progress)
-        ll = GirderLastLayer(problem, fit, settings, seeding.stream(fs, "collocation"), noise)
-        zmap = ll.map(ll.start(fit.phi))
-        Z, is_info = importance_sample(
-            ll, zmap, ll.covariance(zmap), seeding.rng(fs, "noise"), settings
-        )
-        draws.append(Z)
-        member_info.append(
-            {
-                "EI_segments": np.exp(Z[:, : problem.S].mean(0)).tolist(),
-                "log_EI_sd": Z[:, : problem.S].std(0, ddof=1).tolist(),
-                "sigma": float(np.exp(np.median(ll.split(Z)[1]))),
-                "train_s": fit.seconds,
-                **is_info,
-            }
-        )
+    tasks = [_Member(problem, settings, member_fit_seed(seed, m), noise) for m in range(members)]
+    res = (executor or Executor()).map(
+        _run_member,
+        tasks,
+        desc="ensemble members",
+        progress=progress,
+        resources=task_resources("cpu"),
+    )
+    draws, member_info = [z for z, _ in res], [i for _, i in res]
+    for m, i in enumerate(member_info):
         log.info(
             "[ensemble] member %d/%d: EI per segment %s (importance ESS %.0f)",
             m + 1,
             members,
-            ", ".join(f"{e:.4g}" for e in member_info[-1]["EI_segments"]),
-            is_info["ess"],
+            ", ".join(f"{e:.4g}" for e in i["EI_segments"]),
+            i["ess"],
         )
     th = np.stack(draws)  # (member, draw, dim + 1)
     # members' scatter of their means against their own widths (the uniform girder's `MAX_SCATTER_RATIO`)
@@ -285,8 +310,8 @@ def girder_ensemble_posterior(
     info = _info(problem, settings, None) | {"members": member_info}
     return _posterior(
         problem,
-        ll,
-        th.reshape(1, -1, ll.dim),
+        noise is not None,
+        th.reshape(1, -1, th.shape[-1]),
         "ensemble",
         diagnostics,
         info,
@@ -337,7 +362,7 @@ def girder_bpinn_posterior(
     Lc = np.linalg.cholesky(ll.covariance(zmap))
     ns = NUTSSettings.for_profile(profile)
     z, chains = run_chains(GirderPotential(ll), zmap, Lc, ns, seed, progress, executor)
-    post = _posterior(problem, ll, z, "bpinn", {}, {}, 0.0)
+    post = _posterior(problem, ll.ar1 is not None, z, "bpinn", {}, {}, 0.0)
     per = {name: mcmc_diagnostics(d) for name, d in post.girder.draws().items()}
     health = nuts_health(chains)
     diag = {
