@@ -469,6 +469,19 @@ RUNS = (
     ("ar1-strain-iid-snr20-seed0", "the same data analysed as white noise", ()),
     ("ar1-strain-all-snr20-seed0", "AR(1) noise, every method", ()),
     (
+        "damaged-girder-ar1-snr20-seed0",
+        "a damaged girder under AR(1) gauge noise, the reference and the deep ensemble",
+        tuple(
+            (f"{NAMES[k]}: {what}, 90 % {w}", f"methods.{k}.{key}.ci90[{i}]", fmt)
+            for k in ("modal_mcmc", "ensemble")
+            for what, key, fmt in (
+                ("AR(1) coefficient", "noise_ar1", ".3f"),
+                ("damaged segment [N m^2]", "EI_segments[3]", ".4g"),
+            )
+            for i, w in ((0, "low"), (1, "high"))
+        ),
+    ),
+    (
         "bpinn-two-points-smoke",
         "a dataset built to make NUTS struggle",
         (
