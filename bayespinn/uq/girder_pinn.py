@@ -236,13 +236,12 @@ class _Member:
     settings: GirderNetSettings
     seed: object  # the member's fit seed (`member_fit_seed`)
     noise: AR1Noise | None
-    progress: bool = False
 
 
 def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
     """(draws of z (draw, dim), info) of one member: its network trained, its last-layer posterior sampled
     by adaptive importance sampling."""
-    fit = train_fit(t.problem, t.settings, t.seed, t.progress)
+    fit = train_fit(t.problem, t.settings, t.seed)  # quiet: the pool's bar shows the members
     ll = GirderLastLayer(t.problem, fit, t.settings, seeding.stream(t.seed, "collocation"), t.noise)
     zmap = ll.map(ll.start(fit.phi))
     Z, is_info = importance_sample(
@@ -295,7 +294,7 @@ def girder_ensemble_posterior(
             ", ".join(f"{e:.4g}" for e in i["EI_segments"]),
             i["ess"],
         )
-    th = np.stack(draws)  # (member, draw, dim + 1)
+    th = np.stack(draws)  # (member, draw, dim)
     # members' scatter of their means against their own widths (the uniform girder's `MAX_SCATTER_RATIO`)
     means, sds = th.mean(1), th.std(1, ddof=1)
     ratio = float(np.max(means.std(0, ddof=1) / np.mean(sds, 0))) if members > 1 else 0.0
