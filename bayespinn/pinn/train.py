@@ -1,4 +1,6 @@
-"""The one PINN training loop: every method that trains a PINN calls `fit`.
+"""The one PINN training loop (`run_steps`, which the real girder's network trains by too,
+`uq.girder_net.train_fit`) and the uniform girder's fit: every method that trains a uniform-girder PINN
+calls `fit`.
 
 Adam (with the chosen learning-rate schedule and collocation resampling), then an optional L-BFGS polish
 on a fixed set of points. M members can train together as one batched network (`members=M`); their
@@ -93,6 +95,63 @@ def _resolve_device(device: str | torch.device) -> torch.device:
     return torch.device(device)
 
 
+def run_steps(
+    tr,
+    adam_steps: int,
+    lbfgs_steps: int = 0,
+    *,
+    lbfgs_chunk: int = 1,
+    desc: str = "PINN",
+    quiet: bool = False,
+    log_every: int = 1,
+    save: Callable[[], None] | None = None,
+    checkpoint_every: int = 0,
+    callback: Callable[[int, dict], None] | None = None,
+) -> None:
+    """The one training loop, for every network the toolkit trains: Adam steps of the trainer `tr` until
+    its step count reaches `adam_steps`, then L-BFGS in chunks of `lbfgs_chunk` iterations up to
+    ``adam_steps + lbfgs_steps``, with a progress bar (unless `quiet`), a checkpoint (`save`) every
+    `checkpoint_every` Adam steps and after each L-BFGS chunk, and ``callback(step, info)`` after each
+    step or chunk (an exception raised by it stops the loop; the checkpoint stays).
+
+    `tr` carries `step` (steps done: a resumed trainer starts where it stopped), `adam_step()`,
+    `lbfgs_chunk(n)` (when `lbfgs_steps` > 0), `postfix()` (the bar's fields, asked every `log_every`
+    steps) and `callback_info(phase)` ('adam' or 'lbfgs'). The uniform girder's `_Trainer` and the real
+    girder's `GirderTrainer` (`uq.girder_net`) are such trainers."""
+    from tqdm.auto import tqdm
+
+    n_total = adam_steps + lbfgs_steps
+    bar = tqdm(
+        total=n_total,
+        initial=min(tr.step, n_total),
+        disable=quiet,
+        desc=desc,
+        unit="step",
+        leave=False,
+        dynamic_ncols=True,
+    )
+    try:
+        while tr.step < adam_steps:
+            tr.adam_step()
+            bar.update(1)
+            if tr.step % log_every == 0 or tr.step == adam_steps:
+                bar.set_postfix(**tr.postfix(), refresh=False)
+            if save is not None and checkpoint_every and tr.step % checkpoint_every == 0:
+                save()
+            if callback is not None:
+                callback(tr.step, tr.callback_info("adam"))
+        while tr.step < n_total:
+            n = min(lbfgs_chunk, n_total - tr.step)
+            tr.lbfgs_chunk(n)
+            bar.update(n)
+            if save is not None:
+                save()
+            if callback is not None:
+                callback(tr.step, tr.callback_info("lbfgs"))
+    finally:
+        bar.close()
+
+
 def fit(
     problem: Problem,
     settings: TrainSettings | str | None = None,
@@ -158,7 +217,6 @@ def fit(
         tr.load_state_dict(torch.load(path, map_location=dev, weights_only=False))
         log.info("resumed PINN fit from %s at step %d", path, tr.step)
     s = settings
-    n_total = s.epochs + s.lbfgs_iters
     elapsed0 = tr.elapsed
 
     def save_now():
@@ -166,40 +224,18 @@ def fit(
             tr.elapsed = elapsed0 + time.perf_counter() - t0
             tr.save(path)
 
-    from tqdm.auto import tqdm
-
-    bar = tqdm(
-        total=n_total,
-        initial=min(tr.step, n_total),
-        disable=quiet,
+    run_steps(
+        tr,
+        s.epochs,
+        s.lbfgs_iters,
+        lbfgs_chunk=s.lbfgs_chunk,
         desc="PINN",
-        unit="step",
-        leave=False,
-        dynamic_ncols=True,
+        quiet=quiet,
+        log_every=s.log_every,
+        save=save_now if path is not None else None,
+        checkpoint_every=s.checkpoint_every,
+        callback=callback,
     )
-    try:
-        while tr.step < s.epochs:
-            tr.adam_step()
-            bar.update(1)
-            if tr.step % s.log_every == 0 or tr.step == s.epochs:
-                bar.set_postfix(
-                    EI=f"{np.median(tr.EI_raw()):.4g}",
-                    loss=f"{tr.history['total'][-1].sum():.3g}",
-                    refresh=False,
-                )
-            if path is not None and tr.step % s.checkpoint_every == 0:
-                save_now()
-            if callback is not None:
-                callback(tr.step, {"phase": "adam", "EI_raw": tr.EI_raw(), "model": tr.model})
-        while tr.step < n_total:
-            n = min(s.lbfgs_chunk, n_total - tr.step)
-            tr.lbfgs_chunk(n)
-            bar.update(n)
-            save_now()
-            if callback is not None:
-                callback(tr.step, {"phase": "lbfgs", "EI_raw": tr.EI_raw(), "model": tr.model})
-    finally:
-        bar.close()
     # final losses at the final Gaussian width; varpro re-solves the head and EI for the final hidden layers
     # on a fresh point set FINAL_POINTS times the usual size, so that the estimate does not hinge on the
     # last (smaller) set the optimiser saw
@@ -292,4 +328,4 @@ def rel_error(EI: float | np.ndarray, truth: float) -> float | np.ndarray:
     return (np.asarray(EI) - truth) / truth if np.ndim(EI) else (float(EI) - truth) / truth
 
 
-__all__ = ["FitResult", "fit", "networks_per_batch", "rel_error"]
+__all__ = ["FitResult", "fit", "networks_per_batch", "rel_error", "run_steps"]

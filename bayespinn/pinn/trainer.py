@@ -270,6 +270,17 @@ class _Trainer:
     def EI_raw(self) -> np.ndarray:
         return self.problem.EI_ref * np.exp(self.model.log_ei.detach().cpu().double().numpy())
 
+    # ------------------------------------------------------------------ the loop's view (`train.run_steps`)
+    def postfix(self) -> dict:
+        """The progress bar's fields: the members' median EI and the last recorded total loss."""
+        return {
+            "EI": f"{np.median(self.EI_raw()):.4g}",
+            "loss": f"{self.history['total'][-1].sum():.3g}",
+        }
+
+    def callback_info(self, phase: str) -> dict:
+        return {"phase": phase, "EI_raw": self.EI_raw(), "model": self.model}
+
     # ------------------------------------------------------------------ phases
     def set_beta(self, factor: float) -> None:
         """Set the Gaussian width used by the loss to factor * beta (continuation)."""

@@ -269,36 +269,40 @@ class GirderFit:
     loss: float
 
 
-def train_fit(
-    problem: GirderProblem,
-    settings: GirderNetSettings,
-    seed: np.random.SeedSequence,
-    progress: bool = False,
-) -> GirderFit:
-    """Train one network's hidden layers (Adam) with the output layer and phi solved (module docstring)."""
-    t0 = time.perf_counter()
-    gen = torch.Generator().manual_seed(seeding.int_seed(seed))
-    net = PINN(settings.width, settings.depth, members=1, generators=[gen], dtype=torch.float64)
-    hidden = [p for p in net.parameters() if all(p is not q for q in net.head_parameters())]
-    hidden = [p for p in hidden if p is not net.log_ei]
-    opt = torch.optim.Adam(hidden, lr=settings.lr)
-    n = max(settings.steps, 1)
-    sched = torch.optim.lr_scheduler.LambdaLR(
-        opt,
-        lambda i: (
-            (settings.lr_final / settings.lr)
-            + (1 - settings.lr_final / settings.lr) * 0.5 * (1 + math.cos(math.pi * min(i, n) / n))
-        ),
-    )
-    sc = Scales_(problem.sigma0, TRAIN_PHYSICS_SD, TRAIN_PHYSICS_SD, TRAIN_PHYSICS_SD, None)
-    phi = problem.phi0.copy()
-    pts = Points.draw(settings, gen)
-    loss = float("nan")
-    for i in range(settings.steps):
+class GirderTrainer:
+    """One girder network in training, a trainer of the one training loop (`pinn.train.run_steps`): each
+    Adam step moves the hidden layers on the sum of squares of the scaled residuals at the output layer
+    solved for them; every `theta_every` steps phi is re-solved (module docstring)."""
+
+    def __init__(self, problem: GirderProblem, settings: GirderNetSettings, seed):
+        self.problem, self.settings = problem, settings
+        self.gen = torch.Generator().manual_seed(seeding.int_seed(seed))
+        self.net = PINN(
+            settings.width, settings.depth, members=1, generators=[self.gen], dtype=torch.float64
+        )
+        net = self.net
+        hidden = [p for p in net.parameters() if all(p is not q for q in net.head_parameters())]
+        hidden = [p for p in hidden if p is not net.log_ei]
+        self.opt = torch.optim.Adam(hidden, lr=settings.lr)
+        n = max(settings.steps, 1)
+        r = settings.lr_final / settings.lr
+        self.sched = torch.optim.lr_scheduler.LambdaLR(
+            self.opt, lambda i: r + (1 - r) * 0.5 * (1 + math.cos(math.pi * min(i, n) / n))
+        )
+        self.sc = Scales_(
+            problem.sigma0, TRAIN_PHYSICS_SD, TRAIN_PHYSICS_SD, TRAIN_PHYSICS_SD, None
+        )
+        self.phi = problem.phi0.copy()
+        self.pts = Points.draw(settings, self.gen)
+        self.loss = float("nan")
+        self.step = 0
+
+    def adam_step(self) -> None:
+        problem, settings, sc, i = self.problem, self.settings, self.sc, self.step
         if i and i % settings.resample_every == 0:
-            pts = Points.draw(settings, gen)
-        P = pieces(problem, net, pts, problem.y)
-        phit = torch.as_tensor(phi)
+            self.pts = Points.draw(settings, self.gen)
+        P = pieces(problem, self.net, self.pts, problem.y)
+        phit = torch.as_tensor(self.phi)
         with torch.no_grad():
             E = enrichment_column(problem, phit)
         Ap, gp, kp = physics(problem, P, phit, sc)
@@ -306,18 +310,38 @@ def train_fit(
         G, g = Ap + Ad, gp + gd
         c, _ = _solve(G.detach(), g.detach())
         obj = c @ G @ c - 2 * c @ g + kp + kd
-        opt.zero_grad()
+        self.opt.zero_grad()
         obj.backward()
-        opt.step()
-        sched.step()
-        loss = float(obj.detach())
+        self.opt.step()
+        self.sched.step()
+        self.loss = float(obj.detach())
         if (i + 1) % settings.theta_every == 0 or i + 1 == settings.steps:
             with torch.no_grad():
-                Pd = pieces(problem, net, pts, problem.y)
-            phi = solve_phi(problem, _detach(Pd), phi, sc)
-        if progress and (i + 1) % max(1, settings.steps // 10) == 0:
-            log.debug("[girder-pinn] step %d/%d  loss %.4g", i + 1, settings.steps, loss)
-    return GirderFit(net, phi, time.perf_counter() - t0, loss)
+                Pd = pieces(problem, self.net, self.pts, problem.y)
+            self.phi = solve_phi(problem, _detach(Pd), self.phi, sc)
+        self.step += 1
+
+    def postfix(self) -> dict:
+        return {"loss": f"{self.loss:.4g}"}
+
+    def callback_info(self, phase: str) -> dict:
+        return {"phase": phase, "phi": self.phi.copy(), "model": self.net}
+
+
+def train_fit(
+    problem: GirderProblem,
+    settings: GirderNetSettings,
+    seed: np.random.SeedSequence,
+    progress: bool = False,
+) -> GirderFit:
+    """Train one network's hidden layers (Adam) with the output layer and phi solved (module docstring), by
+    the one training loop (`pinn.train.run_steps`; a progress bar with `progress`)."""
+    from ..pinn.train import run_steps
+
+    t0 = time.perf_counter()
+    tr = GirderTrainer(problem, settings, seed)
+    run_steps(tr, settings.steps, desc="girder PINN", quiet=not progress, log_every=10)
+    return GirderFit(tr.net, tr.phi, time.perf_counter() - t0, tr.loss)
 
 
 def _detach(P: Pieces) -> Pieces:
