@@ -96,6 +96,8 @@ log = logging.getLogger(__name__)
 #: freedom, the first proposal's scale on the Laplace covariance (the posterior of a segment next to a
 #: support is skewed and up to twice the Laplace width), and the later proposals' on the weighted covariance
 IS_STAGES, IS_DOF, IS_INFLATE, IS_COV_SCALE = 4, 5.0, 2.0, 1.2
+#: at most this many batches of `is_samples` in the last stage while its effective sample size is short
+IS_MAX_BATCHES = 8
 
 
 def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
@@ -207,17 +209,21 @@ def importance_sample(
 ) -> tuple[np.ndarray, dict]:
     """Draws of one member's exact last-layer posterior by adaptive importance sampling (population Monte
     Carlo): multivariate t proposals (`IS_DOF`), the first at the Laplace covariance times `IS_INFLATE^2`,
-    each next at the weighted mean and covariance of the last; returns `settings.is_draws` draws resampled
-    from the last stage, and its effective sample size."""
+    each next at the weighted mean and covariance of the last. While the last stage's effective sample size
+    is below the convergence verdict's `ESS_MIN`, more batches of `settings.is_samples` are drawn from that
+    same proposal and pooled (their weights are comparable), up to `IS_MAX_BATCHES` batches: the run length
+    follows from the target, as emcee's does from tau. Returns `settings.is_draws` draws resampled from the
+    pooled last stage, its effective sample size and the samples it took."""
     mean, C = z_map.copy(), cov * IS_INFLATE**2
     d = z_map.size
     ess = 0.0
-    for _stage in range(IS_STAGES):
+    for stage in range(IS_STAGES):
         L = np.linalg.cholesky(C + 1e-12 * np.eye(d) * np.trace(C) / d)
-        g = rng.standard_normal((settings.is_samples, d))
-        chi2 = rng.chisquare(IS_DOF, settings.is_samples)
-        Z = mean + (g @ L.T) * np.sqrt(IS_DOF / chi2)[:, None]
-        lw = ll.log_post_many(Z) - _log_t(Z, mean, L, IS_DOF)
+        Z, lw = _t_batch(ll, mean, L, rng, settings.is_samples)
+        if stage == IS_STAGES - 1:  # the last proposal: pooled batches until the ESS target
+            while _ess(lw) < ESS_MIN and Z.shape[0] < IS_MAX_BATCHES * settings.is_samples:
+                Zb, lwb = _t_batch(ll, mean, L, rng, settings.is_samples)
+                Z, lw = np.vstack([Z, Zb]), np.concatenate([lw, lwb])
         w = np.exp(lw - lw.max())
         w /= w.sum()
         ess = float(1.0 / np.sum(w**2))
@@ -225,7 +231,23 @@ def importance_sample(
         R = Z - mean
         C = (R * w[:, None]).T @ R * IS_COV_SCALE**2
     idx = rng.choice(Z.shape[0], size=settings.is_draws, p=w)
-    return Z[idx], {"ess": ess, "max_weight": float(w.max()), "samples": settings.is_samples}
+    return Z[idx], {"ess": ess, "max_weight": float(w.max()), "samples": int(Z.shape[0])}
+
+
+def _t_batch(
+    ll: GirderLastLayer, mean: np.ndarray, L: np.ndarray, rng: np.random.Generator, n: int
+):
+    """n draws of the multivariate t proposal (`IS_DOF`, mean, L L') and their log importance weights."""
+    d = mean.size
+    g = rng.standard_normal((n, d))
+    chi2 = rng.chisquare(IS_DOF, n)
+    Z = mean + (g @ L.T) * np.sqrt(IS_DOF / chi2)[:, None]
+    return Z, ll.log_post_many(Z) - _log_t(Z, mean, L, IS_DOF)
+
+
+def _ess(lw: np.ndarray) -> float:
+    w = np.exp(lw - lw.max())
+    return float(w.sum() ** 2 / np.sum(w**2))
 
 
 @dataclass(frozen=True)
