@@ -160,6 +160,24 @@ def reference(damaged):
     return girder_reference(data, cfg, seed=np.random.SeedSequence(11))
 
 
+def test_importance_sampler_draws_until_its_effective_sample_size_target(last_layer):
+    """A member's importance sampler pools batches from its last proposal until the ESS reaches the
+    convergence verdict's target (or the batch cap); one batch that reaches it is all it draws."""
+    pr, ll, fit = last_layer
+    z = ll.map(ll.start(fit.phi))
+    cov = ll.covariance(z)
+    smoke = G.GirderNetSettings.for_profile("smoke")
+    small = dataclasses.replace(smoke, is_samples=100, is_draws=50)
+    Z, info = G.importance_sample(ll, z, cov, np.random.default_rng(0), small)
+    # 100 samples cannot hold an ESS of 400: a sampler that stops at one batch fails here
+    assert info["samples"] > 100
+    assert info["ess"] >= G.ESS_MIN or info["samples"] == G.IS_MAX_BATCHES * 100
+    assert Z.shape == (50, ll.dim)
+    large = dataclasses.replace(smoke, is_samples=4000, is_draws=50)
+    _, info = G.importance_sample(ll, z, cov, np.random.default_rng(0), large)
+    assert info["ess"] >= G.ESS_MIN and info["samples"] == 4000
+
+
 def test_pinn_methods_match_the_reference_on_a_damaged_girder(damaged, reference):
     """Smoke profile, two segments (the second at 70 %), 30 dB: each PINN method's segment means within 1.5
     reference sds of the reference's, sds within [0.67, 1.5] of its, the damaged segment flagged. Negative
