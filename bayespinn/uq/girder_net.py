@@ -6,7 +6,6 @@ training of one network (`train_fit`)."""
 
 from __future__ import annotations
 
-import logging
 import math
 import time
 from dataclasses import dataclass
@@ -18,7 +17,6 @@ from .. import seeding
 from ..pinn.network import PINN
 from .girder_problem import GirderProblem, enrichment_column
 
-log = logging.getLogger(__name__)
 #: pseudo-sd of the physics rows while training (non-dimensional: w in units of U, the PDE in units of
 #: q = P / L): the network's correction is asked to meet the physics to 1 % of the load's scales
 TRAIN_PHYSICS_SD = 1e-2
