@@ -116,7 +116,7 @@ def run_steps(
 
     `tr` carries `step` (steps done: a resumed trainer starts where it stopped), `adam_step()`,
     `lbfgs_chunk(n)` (when `lbfgs_steps` > 0), `postfix()` (the bar's fields, asked every `log_every`
-    steps) and `callback_info(phase)` ('adam' or 'lbfgs'). The uniform girder's `_Trainer` and the real
+    steps) and, when a `callback` is given, `callback_info(phase)` ('adam' or 'lbfgs'). The uniform girder's `_Trainer` and the real
     girder's `GirderTrainer` (`uq.girder_net`) are such trainers."""
     from tqdm.auto import tqdm
 

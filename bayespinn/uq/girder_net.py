@@ -322,9 +322,6 @@ class GirderTrainer:
     def postfix(self) -> dict:
         return {"loss": f"{self.loss:.4g}"}
 
-    def callback_info(self, phase: str) -> dict:
-        return {"phase": phase, "phi": self.phi.copy(), "model": self.net}
-
 
 def train_fit(
     problem: GirderProblem,

@@ -224,8 +224,7 @@ def importance_sample(
             while _ess(lw) < ESS_MIN and Z.shape[0] < IS_MAX_BATCHES * settings.is_samples:
                 Zb, lwb = _t_batch(ll, mean, L, rng, settings.is_samples)
                 Z, lw = np.vstack([Z, Zb]), np.concatenate([lw, lwb])
-        w = np.exp(lw - lw.max())
-        w /= w.sum()
+        w = _normalised(lw)
         ess = float(1.0 / np.sum(w**2))
         mean = w @ Z
         R = Z - mean
@@ -245,9 +244,14 @@ def _t_batch(
     return Z, ll.log_post_many(Z) - _log_t(Z, mean, L, IS_DOF)
 
 
-def _ess(lw: np.ndarray) -> float:
+def _normalised(lw: np.ndarray) -> np.ndarray:
+    """Importance weights summing to one from their logs."""
     w = np.exp(lw - lw.max())
-    return float(w.sum() ** 2 / np.sum(w**2))
+    return w / w.sum()
+
+
+def _ess(lw: np.ndarray) -> float:
+    return float(1.0 / np.sum(_normalised(lw) ** 2))
 
 
 @dataclass(frozen=True)
