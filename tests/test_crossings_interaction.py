@@ -181,3 +181,78 @@ def test_linearised_likelihood_is_exact_at_its_point_and_its_table_near_it(small
     assert tab.loglik(off[None])[0] == pytest.approx(ex_off, abs=0.05)
     # negative control: the suspension's change matters to the likelihood there
     assert abs(tab.loglik(th[None])[0] - ex_off) > 1.0
+
+
+def _dense_newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n):
+    """The coupled system of `interaction`'s docstring for one parameter set, written directly: the full
+    M, C, K assembled at every step and A a = f - C v_p - K x_p solved densely."""
+    Nd, J = kn.size, P.size
+    D = Nd + J
+    M = np.diag(np.concatenate([np.ones(Nd), m]))
+    x, xd = np.zeros(D), np.zeros(D)
+    q0, q0d = np.zeros(Nd), np.zeros(Nd)
+    Q, F = np.zeros((n, Nd)), np.zeros((n, J))
+    for i in range(n):
+        xj = v * (T0 + i * dt - t0) - off
+        on = (xj >= 0) & (xj <= L)
+        Phi = np.sin(np.outer(xj, kn)) * on[:, None]
+        dPhi = kn * np.cos(np.outer(xj, kn)) * on[:, None]
+        B = 2.0 / (mu * L) * Phi
+        C, K = np.zeros((D, D)), np.zeros((D, D))
+        C[:Nd, :Nd] = np.diag(2 * zeta * omega) + B.T @ (c[:, None] * Phi)
+        K[:Nd, :Nd] = np.diag(omega**2) + B.T @ (k[:, None] * Phi + (c * v)[:, None] * dPhi)
+        C[:Nd, Nd:], K[:Nd, Nd:] = -B.T * c, -B.T * k
+        C[Nd:, :Nd], K[Nd:, :Nd] = -c[:, None] * Phi, -(k[:, None] * Phi + (c * v)[:, None] * dPhi)
+        C[Nd:, Nd:], K[Nd:, Nd:] = np.diag(c), np.diag(k)
+        f = np.concatenate([B.T @ P, np.zeros(J)])
+        C0, K0 = np.diag(2 * zeta * omega), np.diag(omega**2)
+        if i == 0:
+            xa, q0a = np.linalg.solve(M, f), f[:Nd].copy()
+        else:
+            xp, vp = x + dt * xd + dt**2 / 4 * xa, xd + dt / 2 * xa
+            xa = np.linalg.solve(M + dt / 2 * C + dt**2 / 4 * K, f - C @ vp - K @ xp)
+            x, xd = xp + dt**2 / 4 * xa, vp + dt / 2 * xa
+            qp, qv = q0 + dt * q0d + dt**2 / 4 * q0a, q0d + dt / 2 * q0a
+            A0 = np.eye(Nd) + dt / 2 * C0 + dt**2 / 4 * K0
+            q0a = np.linalg.solve(A0, f[:Nd] - C0 @ qv - K0 @ qp)
+            q0, q0d = qp + dt**2 / 4 * q0a, qv + dt / 2 * q0a
+        Q[i], F[i] = x[:Nd] - q0, -m * xa[Nd:] * on
+    return Q, F
+
+
+@pytest.mark.parametrize("block", [7, 256])
+def test_blocked_newmark_equals_the_dense_rule(monkeypatch, block):
+    """`interaction._newmark` (matrices built a block of steps at a time, A inverted through its Schur
+    complement, the step written with A^-1 K and A^-1 M) is the average-acceleration rule itself: equal to
+    the dense step-by-step solve for every parameter set of a batch, whatever the block length."""
+    from bayespinn.crossings import interaction
+
+    monkeypatch.setattr(interaction, "BLOCK", block)
+    L, mu = 30.0, 5000.0
+    P = np.array([40e3, 60e3, 60e3])
+    off = np.array([0.0, 3.5, 4.8])
+    m = P / interaction.G
+    kn = np.arange(1, 3) * math.pi / L
+    rng = np.random.default_rng(3)
+    W = 3
+    EI = 5e9 * np.exp(0.05 * rng.standard_normal(W))
+    fb, zb = rng.uniform(1.5, 3.5, W), rng.uniform(0.05, 0.2, W)
+    wb = 2 * math.pi * fb
+    k, c = m[None] * wb[:, None] ** 2, 2 * zb[:, None] * m[None] * wb[:, None]
+    omega = kn[None] ** 2 * np.sqrt(EI[:, None] / mu)
+    zeta, v, t0 = rng.uniform(0.005, 0.02, W), rng.uniform(8, 12, W), rng.uniform(0.0, 0.2, W)
+    dt, n = 0.25 / float(omega[:, -1].max()), 600
+    T0 = float(t0.min())
+    Q, F = interaction._newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n)
+    for w in range(W):
+        Qd, Fd = _dense_newmark(
+            L, mu, P, off, m, k[w], c[w], kn, omega[w], zeta[w], v[w], t0[w], T0, dt, n
+        )
+        assert np.abs(F[:, w]).max() > 1e-3 * P.max()  # the bodies do bounce in this window
+        np.testing.assert_allclose(Q[:, w], Qd, rtol=0, atol=1e-9 * np.abs(Qd).max())
+        np.testing.assert_allclose(F[:, w], Fd, rtol=0, atol=1e-9 * np.abs(Fd).max())
+    # negative control: the same rule with the bodies' damping left out differs by far more
+    Qc, _ = _dense_newmark(
+        L, mu, P, off, m, k[0], 0 * c[0], kn, omega[0], zeta[0], v[0], t0[0], T0, dt, n
+    )
+    assert np.abs(Qc - Q[:, 0]).max() > 1e-3 * np.abs(Qc).max()

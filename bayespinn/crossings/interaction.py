@@ -36,6 +36,8 @@ from .forward import CrossingModel
 G = 9.81  # m/s^2: an axle load into its body's mass
 #: the girder's modes coupled to the bodies; the Newmark step is STEP_FRACTION / omega_N_DYN
 N_DYN, STEP_FRACTION = 2, 0.25
+#: Newmark steps whose matrices are built at once (memory: BLOCK x W x (N_DYN + axles)^2 x 2 floats)
+BLOCK = 256
 
 
 def interaction_response(base: CrossingModel, EI, zeta, v, t0, fb, zb) -> np.ndarray:
@@ -59,59 +61,7 @@ def interaction_response(base: CrossingModel, EI, zeta, v, t0, fb, zb) -> np.nda
     if T1 <= T0:
         return np.zeros((W, base.x.size))
     n = int(math.ceil((T1 - T0) / dt)) + 1
-    D = Nd + J
-    Mdiag = np.concatenate([np.ones(Nd), m])
-    x = np.zeros((W, D))
-    xd = np.zeros((W, D))
-    xa = np.zeros((W, D))
-    q0, q0d, q0a = np.zeros((W, Nd)), np.zeros((W, Nd)), np.zeros((W, Nd))
-    Q = np.empty((n, W, Nd))  # the interaction's modal response q - q0
-    F = np.empty((n, W, J))  # its force Delta F_j = -m_j z_j''
-    h2, h4 = dt / 2, dt * dt / 4
-    damp0 = 2 * zeta[:, None] * omega
-    eye = np.arange(D)
-    for i in range(n):
-        t = T0 + i * dt
-        xj = v[:, None] * (t - t0[:, None]) - off[None]  # (W, J)
-        on = (xj >= 0.0) & (xj <= L)
-        Phi = np.sin(kn[None, None] * xj[:, :, None]) * on[:, :, None]  # (W, J, Nd)
-        dPhi = kn[None, None] * np.cos(kn[None, None] * xj[:, :, None]) * on[:, :, None]
-        B = (2.0 / (mu * L)) * Phi
-        Cm = np.zeros((W, D, D))
-        Km = np.zeros((W, D, D))
-        Cm[:, :Nd, :Nd] = np.einsum("wjn,wj,wjm->wnm", B, c, Phi)
-        Km[:, :Nd, :Nd] = np.einsum("wjn,wj,wjm->wnm", B, k, Phi) + np.einsum(
-            "wjn,wj,wjm->wnm", B, c * v[:, None], dPhi
-        )
-        Cm[:, eye[:Nd], eye[:Nd]] += damp0
-        Km[:, eye[:Nd], eye[:Nd]] += omega**2
-        Cm[:, :Nd, Nd:] = -np.swapaxes(B, 1, 2) * c[:, None, :]
-        Km[:, :Nd, Nd:] = -np.swapaxes(B, 1, 2) * k[:, None, :]
-        Cm[:, Nd:, :Nd] = -Phi * c[:, :, None]
-        Km[:, Nd:, :Nd] = -(Phi * k[:, :, None] + dPhi * (c * v[:, None])[:, :, None])
-        Cm[:, eye[Nd:], eye[Nd:]] = c
-        Km[:, eye[Nd:], eye[Nd:]] = k
-        f = np.zeros((W, D))
-        f[:, :Nd] = np.einsum("wjn,j->wn", B, P)
-        if i == 0:  # from rest: M a = f
-            xa = f / Mdiag[None]
-            q0a = f[:, :Nd].copy()
-        else:
-            xp = x + dt * xd + h4 * xa
-            vp = xd + h2 * xa
-            A = np.diag(Mdiag)[None] + h2 * Cm + h4 * Km
-            rhs = f - np.einsum("wij,wj->wi", Cm, vp) - np.einsum("wij,wj->wi", Km, xp)
-            xa = np.linalg.solve(A, rhs[:, :, None])[:, :, 0]
-            x = xp + h4 * xa
-            xd = vp + h2 * xa
-            # the modes under the constant forces alone, by the same rule (diagonal)
-            qp = q0 + dt * q0d + h4 * q0a
-            qv = q0d + h2 * q0a
-            q0a = (f[:, :Nd] - damp0 * qv - omega**2 * qp) / (1 + h2 * damp0 + h4 * omega**2)
-            q0 = qp + h4 * q0a
-            q0d = qv + h2 * q0a
-        Q[i] = x[:, :Nd] - q0
-        F[i] = -m[None] * xa[:, Nd:] * on
+    Q, F = _newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n)
     # to the observation times (linear interpolation on the step grid)
     s = (base.t - T0) / dt
     i0 = np.clip(np.floor(s).astype(int), 0, n - 2)
@@ -140,3 +90,98 @@ def interaction_response(base: CrossingModel, EI, zeta, v, t0, fb, zb) -> np.nda
         )  # fmt: skip
     dyn = Qo - modal_force / omega[:, None, :] ** 2
     return out + np.einsum("wpn,pn->wp", dyn, shape)
+
+
+def _newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n):
+    """The coupled system of the module docstring from rest at T0, n steps of dt, for W parameter sets:
+    the interaction's modal response Q = q - q0 (n, W, Nd) and force Delta F (n, W, J).
+
+    The rule is the average-acceleration Newmark one, A a_i = f_i - C_i v_p - K_i x_p with A = M + (dt/2)
+    C_i + (dt^2/4) K_i. The matrices depend on time only through the axles' positions, not on the state,
+    so they are built for `BLOCK` steps at once and the loop over steps is left with two small products:
+    with A^-1 (dt/2 C + dt^2/4 K) = I - A^-1 M and C + dt K = (A - M) / (dt/2) + (dt/2) K,
+
+        a_i = A^-1 f_i - A^-1 K (x + dt/2 v) - (I - A^-1 M) (v / (dt/2) + a),
+
+    and A^-1 comes from its Schur complement on the modes (the bodies' block is diagonal)."""
+    W, Nd, J = omega.shape[0], kn.size, P.size
+    D = Nd + J
+    Mdiag = np.concatenate([np.ones(Nd), m])
+    h2, h4 = dt / 2, dt * dt / 4
+    damp0 = 2 * zeta[:, None] * omega  # (W, Nd)
+    # the modes under the constant forces alone: a time-invariant map of (q, q', q'') per mode
+    den = 1 + h2 * damp0 + h4 * omega**2
+    ra = np.stack([-(omega**2), -damp0 - dt * omega**2, -h2 * damp0 - h4 * omega**2], -1)
+    ra = ra / den[..., None]
+    T0m = np.stack([np.array([1.0, dt, h4]) + h4 * ra, np.array([0.0, 1.0, h2]) + h2 * ra, ra], -2)
+    g0c = np.array([h4, h2, 1.0])
+    a22 = m + h2 * c + h4 * k  # (W, J): A's bodies block, diagonal
+    modes, bodies = np.arange(Nd), np.arange(Nd, D)
+    Q, F = np.empty((n, W, Nd)), np.empty((n, W, J))
+    for b0 in range(0, n, BLOCK):
+        idx = np.arange(b0, min(n, b0 + BLOCK))
+        t = T0 + idx * dt
+        xj = (
+            v[None, :, None] * (t[:, None, None] - t0[None, :, None]) - off[None, None]
+        )  # (b, W, J)
+        on = (xj >= 0.0) & (xj <= L)
+        Phi = np.sin(kn * xj[..., None]) * on[..., None]  # (b, W, J, Nd)
+        dPhi = kn * np.cos(kn * xj[..., None]) * on[..., None]
+        Bt = (2.0 / (mu * L)) * np.swapaxes(Phi, -1, -2)  # (b, W, Nd, J)
+        cP = c[:, :, None] * Phi
+        kP = k[:, :, None] * Phi + (c * v[:, None])[:, :, None] * dPhi
+        C11, K11 = Bt @ cP, Bt @ kP
+        C11[..., modes, modes] += damp0
+        K11[..., modes, modes] += omega**2
+        K12 = -Bt * k[:, None, :]
+        A12 = -Bt * (h2 * c + h4 * k)[:, None, :]
+        A21 = -(h2 * cP + h4 * kP)
+        S = h2 * C11 + h4 * K11 - (A12 / a22[:, None, :]) @ A21
+        S[..., modes, modes] += 1.0
+        Si = _inv_small(S)
+        U = -Si @ (A12 / a22[:, None, :])
+        A21d = A21 / a22[:, :, None]
+        Ainv = np.empty(idx.shape + (W, D, D))
+        Ainv[..., :Nd, :Nd] = Si
+        Ainv[..., :Nd, Nd:] = U
+        Ainv[..., Nd:, :Nd] = -A21d @ Si
+        Ainv[..., Nd:, Nd:] = -A21d @ U
+        Ainv[..., bodies, bodies] += 1.0 / a22
+        Km = np.zeros_like(Ainv)
+        Km[..., :Nd, :Nd] = K11
+        Km[..., :Nd, Nd:] = K12
+        Km[..., Nd:, :Nd] = -kP
+        Km[..., bodies, bodies] = k
+        AK = np.einsum("...ij,...jk->...ik", Ainv, Km, optimize=True)
+        IAM = -Ainv * Mdiag
+        IAM[..., np.arange(D), np.arange(D)] += 1.0
+        fN = np.einsum("bwnj,j->bwn", Bt, P)  # the constant forces' modal load (b, W, Nd)
+        ga = np.einsum("bwin,bwn->bwi", Ainv[..., :Nd], fN)
+        g0 = (fN / den)[..., None] * g0c
+        for ii, i in enumerate(idx):
+            if i == 0:  # from rest: M a = f
+                x, xd = np.zeros((W, D)), np.zeros((W, D))
+                xa = np.concatenate([fN[ii], np.zeros((W, J))], 1)
+                s0 = np.zeros((W, Nd, 3))
+                s0[..., 2] = fN[ii]
+            else:
+                a = ga[ii] - np.einsum("wij,wj->wi", AK[ii], x + h2 * xd)
+                a -= np.einsum("wij,wj->wi", IAM[ii], xd / h2 + xa)
+                x = x + dt * xd + h4 * (xa + a)
+                xd = xd + h2 * (xa + a)
+                xa = a
+                s0 = np.einsum("wnij,wnj->wni", T0m, s0) + g0[ii]
+            Q[i] = x[:, :Nd] - s0[..., 0]
+            F[i] = -m * xa[:, Nd:] * on[ii]
+    return Q, F
+
+
+def _inv_small(S: np.ndarray) -> np.ndarray:
+    """Inverses of a stack of 1 x 1 or 2 x 2 matrices in closed form (larger ones by LAPACK)."""
+    if S.shape[-1] == 1:
+        return 1.0 / S
+    if S.shape[-1] == 2:
+        a, b, c, d = S[..., 0, 0], S[..., 0, 1], S[..., 1, 0], S[..., 1, 1]
+        det = a * d - b * c
+        return np.stack([np.stack([d, -b], -1), np.stack([-c, a], -1)], -2) / det[..., None, None]
+    return np.linalg.inv(S)
