@@ -125,12 +125,35 @@ def test_fluctuating_forces_hold_the_truth_where_constant_forces_miss():
     s = ref.summary({"EI": cfg.beam.EI})
     assert abs(_z(s["EI"], cfg.beam.EI)) < Z_BAND
     assert 0.01 < s["axle_force_sd"]["mean"] < 0.2
+    # the linearisation passes its importance check here, and so the analysis is converged
+    assert ref.diagnostics["linearisation"]["importance_check"]["passed"]
+    assert ref.diagnostics["converged"] and not ref.diagnostics["problems"]
     # negative control: constant forces on the same data (today's modal reference)
     res = bp.analyse(
         data, cfg, methods=("modal",), seed=0, profile="smoke", truth={"EI": cfg.beam.EI}
     )
     m = res.summary["methods"]["modal_mcmc"]
     assert abs(_z(m["EI"], cfg.beam.EI)) > 4.0 or m["fit_check"]["verdict"] == "misfit"
+
+
+def test_a_linearisation_that_fails_its_importance_check_is_not_converged(monkeypatch):
+    """The same fluctuating-force crossing with the check's effective-sample-size bar set above what any
+    weights reach: the draws are then the linearised model's, and the analysis must say it has not
+    converged, naming the check, rather than report them as the posterior."""
+    from bayespinn.crossings import linearised
+
+    monkeypatch.setattr(linearised, "ESS_MIN_FRACTION", 1.01)
+    toml = {
+        "data": {"sample_rate": 100.0},
+        "vehicle": {"axles": [{"load": 37000.0, "offset": 0.0}]},
+    }
+    cfg = bp.resolve("strain", toml)
+    data = _series(cfg, 100.0, 0.0, 5, 30.0, _fluctuating_truth(cfg, 0.06, 2.5, 5))
+    fl = bp.resolve("strain", {**toml, "model": {"axle_forces": "fluctuating"}})
+    with pytest.warns(RuntimeWarning, match="importance check"):
+        ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
+    assert ref.diagnostics["converged"] is False
+    assert any("importance check" in p for p in ref.diagnostics["problems"])
 
 
 def test_several_crossings_shrink_the_sd():

@@ -395,17 +395,30 @@ def crossings_reference(
             diag.update(rhat=d["rhat"])
         for k in ("ess_bulk", "ess_tail"):
             diag[k] = min(diag.get(k, math.inf), d[k])
-    converged = bool(
+    problems = []
+    if not (
         diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN and diag["ess_tail"] >= ESS_MIN
-    )
-    if not converged:
+    ):
+        problems.append(
+            f"R-hat {diag['rhat']:.3f} (at most {RHAT_MAX}), ESS {min(diag['ess_bulk'], diag['ess_tail']):.0f}"
+            f" (at least {ESS_MIN})"
+        )
         warnings.warn(
             f"crossing MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}",
             RuntimeWarning,
             stacklevel=2,
         )
+    if kind == "linearised" and not extra["linearisation"]["importance_check"]["passed"]:
+        # the draws are the linearised model's, not the model's: not a posterior to report as converged
+        chk = extra["linearisation"]["importance_check"]
+        problems.append(
+            f"the linearised posterior fails its importance check against the exact likelihood (effective "
+            f"sample size {chk['ess_fraction']:.2f} x draws, log EI shift {chk['log_EI_shift_sd']:+.2f} sd; "
+            f"{chk['criterion']})"
+        )
+    converged = not problems
     diag.update(
-        converged=converged, tau=ch.tau, steps=ch.steps, walkers=s.n_walkers * s.n_groups,
+        converged=converged, problems=problems, tau=ch.tau, steps=ch.steps, walkers=s.n_walkers * s.n_groups,
         acceptance=ch.acceptance, n_modes=n_modes, truncation_error=trunc,
         force_basis=[c.model.n_basis for c in post.terms] if forces else 0,
         parameters=list(L.names), noise_prior=noise.describe(), scheme=scheme,
