@@ -296,8 +296,10 @@ def summarise(records: list[dict], which: str) -> dict:
             "max": float(z.max()),
         },
         # converged: every check of the analysis met (the sampler's, and the linearisation's where used);
-        # records from before the converged verdict carried the linearisation have None here
-        "converged": sum(r.get("converged") is True for r in rs),
+        # records written before the verdict carried the linearisation's check have no "problems" and
+        # are counted apart, not as converged
+        "converged": sum(r.get("converged") is True and "problems" in r for r in rs),
+        "verdict_missing": sum("problems" not in r for r in rs),
         "linearisation_failed": sum(
             (r.get("linearisation_check") or {}).get("passed") is False for r in rs
         ),
@@ -512,7 +514,7 @@ def write_page(out: Path, doc: dict) -> None:
                 f"{a['fits']} ({100 * a['fits_rate']:.0f} %)",
                 f"{a['misfit']} ({100 * a['misfit_rate']:.0f} %)",
                 f"{a['z']['mean']:+.2f} / {a['z']['min']:+.2f} .. {a['z']['max']:+.2f}",
-                f"{a.get('converged', 'n/a')}",
+                _converged_cell(a),
                 f"{a['runtime_s']['median']:.0f}",
             ]
         )
@@ -539,7 +541,8 @@ def write_page(out: Path, doc: dict) -> None:
                 f"{100 * MISFIT_TARGET:.0f} %. converged: the analyses that met every check of their "
                 "sampler and, where the fluctuating forces are linearised, the linearisation's importance "
                 "check against the exact likelihood (one that fails it reports the linearised model's "
-                "posterior, not the model's)."
+                "posterior, not the model's); not judged: records written before the analysis "
+                "recorded that check."
             )
         )
     per = []
@@ -614,6 +617,14 @@ def write_page(out: Path, doc: dict) -> None:
             )
         )
     c.write_markdown(out / "crossings.md", blocks)
+
+
+def _converged_cell(a: dict) -> str:
+    """The converged count, with the records that predate the verdict said apart."""
+    if "converged" not in a:
+        return "n/a"
+    missing = a.get("verdict_missing", 0)
+    return f"{a['converged']}" + (f" ({missing} not judged)" if missing else "")
 
 
 def _num(v) -> str:
