@@ -4,8 +4,9 @@ linearisation checked against the exact posterior by importance weights.
 
 The fluctuating-force model (`likelihood`) is linear in the force weights w (y = mu(theta) + R(theta)
 D^(1/2)(s, l) w + noise) but not in theta = (log EI, log zeta, each crossing's log v and t0). Those are fixed
-by the data to a small fraction of their priors, where mu and R are linear in them to well under the
-noise. At a point theta* the model becomes
+by the data to a small fraction of their priors, where mu and R are assumed linear in them to well under
+the noise (R is held at theta*: on crossings where the fitted fluctuation is large that assumption fails,
+and the importance check below says so; docs/methods.md). At a point theta* the model becomes
 
     y_c = mu_c(theta*) + J_c (theta - theta*) + R_c(theta*) D_c^(1/2) w_c + e,    e ~ N(0, sigma^2 I),
 
