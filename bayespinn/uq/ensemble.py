@@ -18,7 +18,7 @@ variance of their means, the spread between networks (`pool_log_ei`).
 The trained EI itself is not the centre. Training minimises data misfit plus physics penalties of weight
 one, while the marginal weighs the physics at the pseudo-sd the network achieves, so the two optima differ;
 and randomise-then-optimise members are posterior draws only in the linear-Gaussian case. Measured on the
-family of bridges at 30 dB (issue 21), centring on the trained EIs (variance: local + between / M) put the
+family of bridges at 30 dB, centring on the trained EIs (variance: local + between / M) put the
 ensemble's mean 0.74 reference sd from the reference's, bridge to bridge (sd of z over 24 bridges, largest
 2.46, where one bridge's five trained members sat at z = 0.0 to 7.1); the same members' marginal means sat
 within 0.35 sd of the reference's on that bridge (their mixture: z +0.13, sd 1.19x). Members whose
