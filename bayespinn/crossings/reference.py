@@ -401,7 +401,7 @@ def crossings_reference(
     ):
         problems.append(
             f"R-hat {diag['rhat']:.3f} (at most {RHAT_MAX}), ESS {min(diag['ess_bulk'], diag['ess_tail']):.0f}"
-            f" (at least {ESS_MIN})"
+            f" (at least {ESS_MIN:.0f})"
         )
         warnings.warn(
             f"crossing MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}",
