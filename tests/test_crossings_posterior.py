@@ -112,15 +112,21 @@ def _fluctuating_truth(cfg, amp: float, freq: float, seed: int):
     return lambda x, t, a_u, a_xx: resp.sample(x, t, a_u, a_xx)
 
 
-@pytest.mark.study  # about 17 minutes on 2 shared cores: run with -m study, outside CI's slow tier
-def test_fluctuating_forces_hold_the_truth_where_constant_forces_miss():
+def _fluctuating_crossing():
+    """One axle whose force fluctuates (a sprung-like bounce drawn here): the truth's config, the data at
+    30 dB, and the config that analyses them with fluctuating forces."""
     toml = {
         "data": {"sample_rate": 100.0},
         "vehicle": {"axles": [{"load": 37000.0, "offset": 0.0}]},
     }
     cfg = bp.resolve("strain", toml)
     data = _series(cfg, 100.0, 0.0, 5, 30.0, _fluctuating_truth(cfg, 0.06, 2.5, 5))
-    fl = bp.resolve("strain", {**toml, "model": {"axle_forces": "fluctuating"}})
+    return cfg, data, bp.resolve("strain", {**toml, "model": {"axle_forces": "fluctuating"}})
+
+
+@pytest.mark.study  # about 17 minutes on 2 shared cores: run with -m study, outside CI's slow tier
+def test_fluctuating_forces_hold_the_truth_where_constant_forces_miss():
+    cfg, data, fl = _fluctuating_crossing()
     ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
     s = ref.summary({"EI": cfg.beam.EI})
     assert abs(_z(s["EI"], cfg.beam.EI)) < Z_BAND
@@ -143,13 +149,7 @@ def test_a_linearisation_that_fails_its_importance_check_is_not_converged(monkey
     from bayespinn.crossings import linearised
 
     monkeypatch.setattr(linearised, "ESS_MIN_FRACTION", 1.01)
-    toml = {
-        "data": {"sample_rate": 100.0},
-        "vehicle": {"axles": [{"load": 37000.0, "offset": 0.0}]},
-    }
-    cfg = bp.resolve("strain", toml)
-    data = _series(cfg, 100.0, 0.0, 5, 30.0, _fluctuating_truth(cfg, 0.06, 2.5, 5))
-    fl = bp.resolve("strain", {**toml, "model": {"axle_forces": "fluctuating"}})
+    cfg, data, fl = _fluctuating_crossing()
     with pytest.warns(RuntimeWarning, match="importance check"):
         ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
     assert ref.diagnostics["converged"] is False
