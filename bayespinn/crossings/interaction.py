@@ -134,12 +134,12 @@ def _newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n):
         C11[..., modes, modes] += damp0
         K11[..., modes, modes] += omega**2
         K12 = -Bt * k[:, None, :]
-        A12 = -Bt * (h2 * c + h4 * k)[:, None, :]
+        A12d = -Bt * ((h2 * c + h4 * k) / a22)[:, None, :]  # A12 A22^-1
         A21 = -(h2 * cP + h4 * kP)
-        S = h2 * C11 + h4 * K11 - (A12 / a22[:, None, :]) @ A21
+        S = h2 * C11 + h4 * K11 - A12d @ A21
         S[..., modes, modes] += 1.0
         Si = _inv_small(S)
-        U = -Si @ (A12 / a22[:, None, :])
+        U = -Si @ A12d
         A21d = A21 / a22[:, :, None]
         Ainv = np.empty(idx.shape + (W, D, D))
         Ainv[..., :Nd, :Nd] = Si
