@@ -332,6 +332,17 @@ def exact_loglik(post: CrossingsLogPosterior, theta: np.ndarray, chunk: int = 16
     return np.concatenate(out)
 
 
+def exact_log_posterior(post: CrossingsLogPosterior, theta: np.ndarray) -> np.ndarray:
+    """log prior + `exact_loglik` (the model's log posterior, -inf outside the prior's support)."""
+    th = np.atleast_2d(theta)
+    lp = post.log_prior(th)
+    out = np.full(th.shape[0], -np.inf)
+    ok = np.isfinite(lp)
+    if ok.any():
+        out[ok] = lp[ok] + exact_loglik(post, th[ok])
+    return out
+
+
 def check(lin: Linearisation, flat: np.ndarray, rng: np.random.Generator) -> dict:
     """Importance weights of N_CHECK joint draws (module docstring): their effective sample size and
     log EI's weighted shift in posterior sds, and whether the linearisation passes."""

@@ -47,6 +47,8 @@ TRUNCATION_FRACTION = 0.01
 #: second; the first mode alone leaves 0.2 % of those responses (strain gauges, against 24 modes), some
 #: 4e-5 of the signal, while no mode at all would leave 15 %
 BASIS_MODES = 1
+#: chains the importance sampler's resampled draws are split into (a layout, not independent chains)
+IMPORTANCE_CHAINS = 4
 #: modes carried by the predictor (reports, fit check)
 PREDICT_MODES = 24
 
@@ -317,19 +319,29 @@ def crossings_reference(
     elif (
         kind == "linearised"
     ):  # the nonlinear parameters linearised, forces and theta integrated out
-        from .linearised import linearised_sample
+        from .linearised import exact_log_posterior, linearised_sample
 
         flat, ch, lin, extra = linearised_sample(post, th, s, seed, progress)
         shape = ch.draws.shape[:2]
-        draws = flat.reshape(*shape, L.dim)
         th = lin.theta.copy()
-        chk = extra["linearisation"]["importance_check"]
-        if not chk["passed"]:
-            warnings.warn(
-                "the crossing posterior's linearisation does not pass its importance check "
-                f"({chk['criterion']}: ESS {chk['ess_fraction']:.2f} x draws, log EI shift "
-                f"{chk['log_EI_shift_sd']:+.2f} sd)", RuntimeWarning, stacklevel=2,
-            )  # fmt: skip
+        if not extra["linearisation"]["importance_check"]["passed"]:
+            # the linearisation is only a guide here: the exact posterior by adaptive importance sampling
+            from .importance import amis
+
+            rng = np.random.default_rng(seeding.child(seed, "emcee", 9300))
+            flat, lp_is, extra["importance"] = amis(
+                lambda z: exact_log_posterior(post, z), flat, rng, progress
+            )
+            kind = "importance"
+            shape = (IMPORTANCE_CHAINS, flat.shape[0] // IMPORTANCE_CHAINS)
+            if not extra["importance"]["passed"]:
+                imp = extra["importance"]
+                warnings.warn(
+                    "the crossing posterior's importance sampling did not converge "
+                    f"({imp['criterion']}: ESS {imp['ess']:.0f}, k-hat {imp['khat']:.2f})",
+                    RuntimeWarning, stacklevel=2,
+                )  # fmt: skip
+        draws = flat.reshape(*shape, L.dim)
     else:
         if forces:  # the whole maximum under the exact likelihood
             res = minimize(
@@ -350,6 +362,13 @@ def crossings_reference(
         scheme = (
             "emcee on the shared parameters and sigma; each crossing's speed and entry time integrated "
             "out by Laplace (tabulated in the shared parameters), then drawn from its Laplace Gaussian"
+        )
+    elif kind == "importance":
+        sig = par["sigma"].reshape(shape)
+        scheme = (
+            "adaptive multiple importance sampling of the exact posterior (axle-force fluctuations "
+            "integrated out at every point), started from the linearised posterior, which failed its "
+            "importance check; equal-weight draws resampled from the weighted ones"
         )
     elif kind == "linearised":
         sig = par["sigma"].reshape(shape)
@@ -388,34 +407,35 @@ def crossings_reference(
             e["body_frequency"] = par["fb"][i].reshape(shape)
             e["body_damping"] = par["zb"][i].reshape(shape)
         nuisance["crossings"][c.name] = e
-    diag = {}
-    for n in L.names:
-        d = mcmc_diagnostics(draws[:, :, L.index[n]])
-        if not diag or d["rhat"] > diag["rhat"]:
-            diag.update(rhat=d["rhat"])
-        for k in ("ess_bulk", "ess_tail"):
-            diag[k] = min(diag.get(k, math.inf), d[k])
+    diag: dict = {}
     problems = []
-    if not (
-        diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN and diag["ess_tail"] >= ESS_MIN
-    ):
-        problems.append(
-            f"R-hat {diag['rhat']:.3f} (at most {RHAT_MAX}), ESS {min(diag['ess_bulk'], diag['ess_tail']):.0f}"
-            f" (at least {ESS_MIN:.0f})"
-        )
-        warnings.warn(
-            f"crossing MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}",
-            RuntimeWarning,
-            stacklevel=2,
-        )
-    if kind == "linearised" and not extra["linearisation"]["importance_check"]["passed"]:
-        # the draws are the linearised model's, not the model's: not a posterior to report as converged
-        chk = extra["linearisation"]["importance_check"]
-        problems.append(
-            f"the linearised posterior fails its importance check against the exact likelihood (effective "
-            f"sample size {chk['ess_fraction']:.2f} x draws, log EI shift {chk['log_EI_shift_sd']:+.2f} sd; "
-            f"{chk['criterion']})"
-        )
+    if kind == "importance":  # weighted draws: the weights' ESS and k-hat, not chain statistics
+        imp = extra["importance"]
+        diag.update(rhat=None, ess_bulk=imp["ess"], ess_tail=imp["ess"])
+        if not imp["passed"]:
+            problems.append(
+                f"importance sampling of the exact posterior did not converge in {imp['rounds']} "
+                f"rounds (ESS {imp['ess']:.0f}, Pareto k-hat {imp['khat']:.2f}; {imp['criterion']})"
+            )
+    else:
+        for n in L.names:
+            d = mcmc_diagnostics(draws[:, :, L.index[n]])
+            if not diag or d["rhat"] > diag["rhat"]:
+                diag.update(rhat=d["rhat"])
+            for k in ("ess_bulk", "ess_tail"):
+                diag[k] = min(diag.get(k, math.inf), d[k])
+        if not (
+            diag["rhat"] <= RHAT_MAX and diag["ess_bulk"] >= ESS_MIN and diag["ess_tail"] >= ESS_MIN
+        ):
+            problems.append(
+                f"R-hat {diag['rhat']:.3f} (at most {RHAT_MAX}), ESS "
+                f"{min(diag['ess_bulk'], diag['ess_tail']):.0f} (at least {ESS_MIN:.0f})"
+            )
+            warnings.warn(
+                f"crossing MCMC did not meet R-hat <= {RHAT_MAX} and ESS >= {ESS_MIN}: {diag}",
+                RuntimeWarning,
+                stacklevel=2,
+            )
     converged = not problems
     diag.update(
         converged=converged, problems=problems, tau=ch.tau, steps=ch.steps, walkers=s.n_walkers * s.n_groups,
@@ -429,7 +449,11 @@ def crossings_reference(
     predictor = CrossingsPredictor(cfg, data, post, flat, mean_th)
     out = CrossingsReference(
         REFERENCE_KEY, EI, sig, diagnostics=diag, info=info, predictor=predictor,
-        sample_stats={"lp": ch.lp, "acceptance": ch.walker_acceptance},
+        sample_stats=(
+            {"lp": lp_is.reshape(shape)}
+            if kind == "importance"
+            else {"lp": ch.lp, "acceptance": ch.walker_acceptance}
+        ),
         nuisance=nuisance, crossing_names=tuple(c.name for c in post.terms),
     )  # fmt: skip
     if fit_checks and len(post.terms) > 1:
