@@ -142,18 +142,40 @@ def test_fluctuating_forces_hold_the_truth_where_constant_forces_miss():
     assert abs(_z(m["EI"], cfg.beam.EI)) > 4.0 or m["fit_check"]["verdict"] == "misfit"
 
 
-def test_a_linearisation_that_fails_its_importance_check_is_not_converged(monkeypatch):
-    """The same fluctuating-force crossing with the check's effective-sample-size bar set above what any
-    weights reach: the draws are then the linearised model's, and the analysis must say it has not
-    converged, naming the check, rather than report them as the posterior."""
+def test_a_failed_linearisation_is_replaced_by_the_exact_posterior(monkeypatch):
+    """The fluctuating-force crossing with the linearisation's check set above what any weights reach:
+    the exact posterior is then importance-sampled from the linearised draws. On these data the
+    linearisation is good (it passes its check unpatched, see above), so the exact posterior's log EI
+    must agree with the linearised one within 0.3 of its sd, its sd within 20 %, and the analysis be
+    converged by the sampler's own check."""
     from bayespinn.crossings import linearised
 
     monkeypatch.setattr(linearised, "ESS_MIN_FRACTION", 1.01)
     cfg, data, fl = _fluctuating_crossing()
-    with pytest.warns(RuntimeWarning, match="importance check"):
+    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
+    d = ref.diagnostics
+    assert d["importance"]["passed"] and d["converged"] and not d["problems"]
+    lin = d["linearisation"]
+    log_ei = np.log(np.asarray(ref.EI)).ravel()
+    assert abs(log_ei.mean() - lin["log_EI_mean"]) < 0.3 * lin["log_EI_sd"]
+    assert abs(log_ei.std() / lin["log_EI_sd"] - 1.0) < 0.2
+    assert abs(_z(ref.summary({"EI": cfg.beam.EI})["EI"], cfg.beam.EI)) < Z_BAND
+
+
+def test_an_importance_sampler_that_fails_its_check_is_not_converged(monkeypatch):
+    """Negative control: the linearisation rejected as above and the importance sampler held to one round
+    with an effective sample size it cannot reach: the analysis must say it has not converged, naming
+    the check, rather than report those draws as the posterior."""
+    from bayespinn.crossings import importance, linearised
+
+    monkeypatch.setattr(linearised, "ESS_MIN_FRACTION", 1.01)
+    monkeypatch.setattr(importance, "MAX_ROUNDS", 1)
+    monkeypatch.setattr(importance, "ESS_TARGET", 1e9)
+    cfg, data, fl = _fluctuating_crossing()
+    with pytest.warns(RuntimeWarning, match="importance sampling"):
         ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
     assert ref.diagnostics["converged"] is False
-    assert any("importance check" in p for p in ref.diagnostics["problems"])
+    assert any("importance sampling" in p for p in ref.diagnostics["problems"])
 
 
 def test_several_crossings_shrink_the_sd():

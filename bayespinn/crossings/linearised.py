@@ -444,6 +444,9 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
             "rounds": len(moves),
             "last_move_sd": moves[-1] if moves else None,
             "importance_check": chk,
+            # the linearised posterior's log EI, kept beside whatever replaces it
+            "log_EI_mean": float(flat[:, 0].mean()),
+            "log_EI_sd": float(flat[:, 0].std()),
         }
     }
     return flat, ch, lin, extra
