@@ -156,6 +156,16 @@ def _study_jobs() -> list[Job]:
                 (study,),
             )
         )  # fmt: skip
+    crossings = [f"{PAPER}/crossings/g{g}-c{k}.json" for g in range(3) for k in range(10)]
+    out.append(
+        Job(
+            "crossings",
+            (PY, "studies/crossings.py", "--girders", "3", "--crossings", "10", "--resume",
+             "--out", PAPER),
+            f"{PAPER}/crossings/study.json",
+            (f"{PAPER}/crossings/study.json", *crossings),
+        )
+    )  # fmt: skip
     for t in ("table4", "table6", "table5"):  # table5 reads table4's run folders
         out.append(
             Job(
@@ -227,7 +237,12 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
         return float(doc["runtime_s"]), "its run time"
     if isinstance(doc.get("records"), list) and doc["records"]:
         recs = doc["records"]
-        t = sum(float(r.get("time_s") or 0.0) for r in recs)
+        t = sum(
+            float(r.get("time_s") or 0.0)  # a crossing record: its simulation and both analyses
+            + float(r.get("simulate_s") or 0.0)
+            + sum(float((r.get(a) or {}).get("runtime_s") or 0.0) for a in ("declared", "today"))
+            for r in recs
+        )
         t += float((doc.get("time_reference") or {}).get("time_s") or 0.0)
         return t, "the sum of its replicates' times"
     if isinstance(doc.get("rows"), list) and any("folder" in r for r in doc["rows"]):

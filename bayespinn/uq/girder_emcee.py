@@ -1,11 +1,10 @@
-"""The girder reference's sampler (`uq.girder_posterior`): `n_groups` independent emcee ensembles with
-the differential-evolution move, grown in chunks until the post-burn-in chain is long against the
-integrated autocorrelation time (`GirderMCMCSettings`, `run_emcee`); a function of the seed.
+"""The girder reference's use of the emcee driver (`uq.sampler.run_groups`): its settings
+(`GirderMCMCSettings`: walkers from the dimension, differential-evolution moves, tau required stable) and
+`run_emcee`, which starts the groups from the Laplace covariance; a function of the seed.
 """
 
 from __future__ import annotations
 
-import logging
 import math
 import warnings
 from dataclasses import dataclass
@@ -15,6 +14,7 @@ import numpy as np
 from .. import seeding
 from ..config import _check_number
 from ..errors import InputError
+from .sampler import collect, run_groups
 
 
 @dataclass(frozen=True)
@@ -87,8 +87,9 @@ def run_emcee(
     seed: int | np.random.SeedSequence = 0,
 ) -> GirderChains:
     """Sample a vectorised log density (theta (W, D) -> (W,)) with `n_groups` independent emcee
-    ensembles started from N(center, start_scale^2 cov) (draws outside the support redrawn).
-    A function of the seed."""
+    ensembles (`uq.sampler.run_groups`) started from N(center, start_scale^2 cov) (draws outside the
+    support redrawn), until the run after burn-in is tau_factor tau long and tau moved by at most
+    tau_rtol since the last check. A function of the seed."""
     import emcee
 
     s = settings or GirderMCMCSettings()
@@ -96,7 +97,7 @@ def run_emcee(
     D = center.size
     nw = s.walkers_per_group(D)
     C = np.linalg.cholesky(np.atleast_2d(cov) + 1e-300 * np.eye(D))
-    samplers, states = [], []
+    starts = []
     for g in range(s.n_groups):
         r = np.random.default_rng(seeding.child(seed, "emcee", g))
         p0 = center + s.start_scale * r.standard_normal((nw, D)) @ C.T
@@ -107,49 +108,30 @@ def run_emcee(
             p0[bad] = center + 0.5 * s.start_scale * r.standard_normal((int(bad.sum()), D)) @ C.T
         else:
             raise RuntimeError("could not start the walkers inside the posterior's support")
-        moves = None if s.moves == "stretch" else emcee.moves.DEMove()
-        sampler = emcee.EnsembleSampler(nw, D, log_prob, moves=moves, vectorize=True)
-        rs = np.random.RandomState(seeding.int_seed(seeding.child(seed, "emcee", 1000 + g)) % 2**32)
-        sampler.random_state = rs.get_state()
-        samplers.append(sampler)
-        states.append(p0)
-    logging.getLogger("emcee").setLevel(logging.ERROR)
-    steps, tau, tau_prev = 0, float("nan"), float("nan")
-    tau_dim = np.full(D, np.nan)
-    while True:
-        for i, sm in enumerate(samplers):
-            states[i] = sm.run_mcmc(states[i], s.chunk, progress=False)
-        steps += s.chunk
-        if steps < s.min_steps:
-            continue
-        per = np.array(
-            [
-                emcee.autocorr.integrated_time(sm.get_chain()[steps // 3 :], quiet=True)
-                for sm in samplers
-            ]
+        starts.append(p0)
+    last = {"tau": float("nan")}
+
+    def enough(steps: int, tau_dim: np.ndarray) -> tuple[bool, int]:
+        tau, prev = float(tau_dim.max()), last["tau"]
+        last["tau"] = tau
+        long_enough = steps - int(math.ceil(s.burn_factor * tau)) >= s.tau_factor * tau
+        stable = math.isfinite(prev) and abs(tau - prev) <= s.tau_rtol * tau
+        last["ok"] = long_enough and stable
+        return last["ok"], int(math.ceil((s.tau_factor + s.burn_factor) * tau))
+
+    samplers, steps, tau_dim = run_groups(
+        log_prob, starts, seed, chunk=s.chunk, min_steps=s.min_steps, max_steps=s.max_steps,
+        enough=enough, moves=None if s.moves == "stretch" else emcee.moves.DEMove,
+    )  # fmt: skip
+    tau = float(tau_dim.max())
+    if not last.get("ok"):
+        warnings.warn(
+            f"girder MCMC stopped at max_steps={s.max_steps} with tau={tau:.1f} "
+            f"(needs {s.tau_factor:g} tau after burn-in, tau stable to {s.tau_rtol:g})",
+            RuntimeWarning,
+            stacklevel=2,
         )
-        tau_dim = per.max(axis=0)
-        tau = float(tau_dim.max())
-        burn = int(math.ceil(s.burn_factor * tau))
-        long_enough = steps - burn >= s.tau_factor * tau
-        stable = math.isfinite(tau_prev) and abs(tau - tau_prev) <= s.tau_rtol * tau
-        if (long_enough and stable) or steps >= s.max_steps:
-            if not (long_enough and stable):
-                warnings.warn(
-                    f"girder MCMC stopped at max_steps={s.max_steps} with tau={tau:.1f} "
-                    f"(needs {s.tau_factor:g} tau after burn-in, tau stable to {s.tau_rtol:g})",
-                    RuntimeWarning,
-                    stacklevel=3,
-                )
-            break
-        tau_prev = tau
     burn = min(int(math.ceil(s.burn_factor * tau)), steps // 2)
     thin = max(1, int(tau / 4))
-
-    def grouped(a: np.ndarray) -> np.ndarray:  # (step, walker, ...) -> (walker * step, ...)
-        return np.swapaxes(a, 0, 1).reshape((-1,) + a.shape[2:])
-
-    theta = np.stack([grouped(sm.get_chain(discard=burn, thin=thin)) for sm in samplers])
-    lp = np.stack([grouped(sm.get_log_prob(discard=burn, thin=thin)) for sm in samplers])
-    acc = float(np.mean([sm.acceptance_fraction.mean() for sm in samplers]))
+    theta, lp, _, acc = collect(samplers, burn, thin)
     return GirderChains(theta, lp, tau, tau_dim, steps, burn, thin, nw * s.n_groups, acc)

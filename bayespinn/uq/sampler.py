@@ -1,9 +1,12 @@
-"""Generic emcee driver: independent walker groups, run length from the autocorrelation time.
+"""The one emcee driver: independent walker groups, run length from the autocorrelation time.
 
-`sample(log_prob, center, scale, settings, seed)` runs `n_groups` independent `EnsembleSampler`s
-(vectorised log-probability) from a dispersed cloud around `center`, in chunks, until the run is at
-least `tau_factor` integrated autocorrelation times long (plus burn-in). Diagnostics treat each group
-as one chain: its walkers' post-burn-in trajectories one after another.
+`run_groups` runs one vectorised `EnsembleSampler` per start cloud, seeded from the run's seed, in
+chunks until a stopping rule on the integrated autocorrelation time says the run is long enough, and
+`collect` takes every group's post-burn-in draws (each group one chain: its walkers' trajectories one
+after another). Two front ends use it: `sample(log_prob, center, scale, settings, seed)` for the modal and
+crossing references (a dispersed cloud about `center`, `tau_factor` autocorrelation times after burn-in)
+and `uq.girder_emcee.run_emcee` for the girder reference (a Laplace-covariance cloud, differential
+evolution moves, tau also required to be stable between checks).
 """
 
 from __future__ import annotations
@@ -78,6 +81,88 @@ def _inside(log_prob, center: np.ndarray, p0: np.ndarray, tries: int = 20) -> np
     return p0
 
 
+def run_groups(
+    log_prob: Callable[[np.ndarray], np.ndarray],
+    starts: list[np.ndarray],
+    seed: int | np.random.SeedSequence,
+    *,
+    chunk: int,
+    min_steps: int,
+    max_steps: int,
+    enough: Callable[[int, np.ndarray], tuple[bool, int]],
+    moves=None,
+    progress: bool = False,
+    desc: str = "MCMC",
+) -> tuple[list, int, np.ndarray]:
+    """emcee groups from the start clouds (walkers, D) grown by `chunk` steps until `enough(steps,
+    tau_per_parameter)` returns (True, _) (checked from `min_steps` on; its second value is the steps it
+    expects in all, for the progress bar) or `max_steps`. Group g's walkers draw from seeding stream
+    ("emcee", 1000 + g). Returns the samplers, the steps run and tau per parameter (the largest over
+    the groups; NaN before the first check)."""
+    import emcee
+
+    samplers = []
+    for g, p0 in enumerate(starts):
+        sampler = emcee.EnsembleSampler(
+            p0.shape[0], p0.shape[1], log_prob, moves=moves() if moves else None, vectorize=True
+        )
+        rs = np.random.RandomState(seeding.int_seed(seeding.child(seed, "emcee", 1000 + g)) % 2**32)
+        sampler.random_state = rs.get_state()
+        samplers.append(sampler)
+    states = list(starts)
+    logging.getLogger("emcee").setLevel(
+        logging.ERROR
+    )  # its short-chain warning is our loop condition
+    steps = 0
+    tau_dim = np.full(starts[0].shape[1], np.nan)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=min_steps, desc=desc, unit="step", leave=False)
+    while True:
+        for i, sampler in enumerate(samplers):
+            states[i] = sampler.run_mcmc(states[i], chunk, progress=False)
+        steps += chunk
+        if bar is not None:
+            bar.update(chunk)
+        if steps < min_steps:
+            continue
+        per = np.array(
+            [
+                emcee.autocorr.integrated_time(sm.get_chain()[steps // 3 :], quiet=True)
+                for sm in samplers
+            ]
+        )
+        tau_dim = per.max(axis=0)
+        done, need = enough(steps, tau_dim)
+        if done or steps >= max_steps:
+            break
+        if bar is not None:
+            bar.total = min(need, max_steps)
+            bar.refresh()
+    if bar is not None:
+        bar.close()
+    return samplers, steps, tau_dim
+
+
+def collect(
+    samplers: list, burn: int, thin: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Every group's draws after `burn` steps, thinned: draws (group, draw, D), their log densities and
+    the acceptance fraction of the walker that made each (group, draw), and the mean acceptance."""
+    draws = np.stack([_group_chain(sm.get_chain(discard=burn, thin=thin)) for sm in samplers])
+    lp = np.stack(
+        [_group_chain(sm.get_log_prob(discard=burn, thin=thin)[..., None])[:, 0] for sm in samplers]
+    )
+    per_walker = []
+    for sm in samplers:
+        kept = sm.get_chain(discard=burn, thin=thin).shape[0]
+        per_walker.append(np.repeat(sm.acceptance_fraction, kept))  # walker by walker, as in draws
+    acc = float(np.mean([sm.acceptance_fraction.mean() for sm in samplers]))
+    return draws, lp, np.stack(per_walker), acc
+
+
 def sample(
     log_prob: Callable[[np.ndarray], np.ndarray],
     center: np.ndarray,
@@ -87,62 +172,29 @@ def sample(
     progress: bool = False,
     desc: str = "MCMC",
 ) -> Chains:
-    """Sample a vectorised log-density (theta (W, D) -> (W,)) with emcee; a function of the seed."""
-    import emcee
-
+    """Sample a vectorised log-density (theta (W, D) -> (W,)) from a cloud center + dispersion x scale x
+    N(0, 1) (walkers outside the support pulled in), until the run is (tau_factor + burn_factor) tau
+    long; a function of the seed."""
     s = settings or MCMCSettings()
     center = np.asarray(center, float)
     scale = np.asarray(scale, float)
     dim = center.size
-    samplers, states = [], []
+    starts = []
     for g in range(s.n_groups):
         r = np.random.default_rng(seeding.child(seed, "emcee", g))
         p0 = center[None, :] + s.dispersion * scale[None, :] * r.standard_normal((s.n_walkers, dim))
-        p0 = _inside(log_prob, center, p0)
-        sampler = emcee.EnsembleSampler(s.n_walkers, dim, log_prob, vectorize=True)
-        rs = np.random.RandomState(seeding.int_seed(seeding.child(seed, "emcee", 1000 + g)) % 2**32)
-        sampler.random_state = rs.get_state()
-        samplers.append(sampler)
-        states.append(p0)
-    logging.getLogger("emcee").setLevel(
-        logging.ERROR
-    )  # its short-chain warning is our loop condition
-    steps, tau = 0, float("nan")
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
+        starts.append(_inside(log_prob, center, p0))
 
-        bar = tqdm(total=s.min_steps, desc=desc, unit="step", leave=False)
-    while True:
-        for i, sampler in enumerate(samplers):
-            states[i] = sampler.run_mcmc(states[i], s.chunk, progress=False)
-        steps += s.chunk
-        if bar is not None:
-            bar.update(s.chunk)
-        if steps < s.min_steps:
-            continue
-        taus = [
-            emcee.autocorr.integrated_time(sm.get_chain()[steps // 3 :], quiet=True).max()
-            for sm in samplers
-        ]
-        tau = float(np.max(taus))
-        need = int(math.ceil((s.tau_factor + s.burn_factor) * tau))
-        if steps >= need or steps >= s.max_steps:
-            break
-        if bar is not None:
-            bar.total = min(need, s.max_steps)
-            bar.refresh()
-    if bar is not None:
-        bar.close()
+    def enough(steps: int, tau_dim: np.ndarray) -> tuple[bool, int]:
+        need = int(math.ceil((s.tau_factor + s.burn_factor) * float(tau_dim.max())))
+        return steps >= need, need
+
+    samplers, steps, tau_dim = run_groups(
+        log_prob, starts, seed, chunk=s.chunk, min_steps=s.min_steps, max_steps=s.max_steps,
+        enough=enough, progress=progress, desc=desc,
+    )  # fmt: skip
+    tau = float(tau_dim.max())
     burn = int(math.ceil(max(s.burn_factor * tau, steps / 5)))
     thin = max(1, int(tau / 4))
-    draws = np.stack([_group_chain(sm.get_chain(discard=burn, thin=thin)) for sm in samplers])
-    acc = float(np.mean([sm.acceptance_fraction.mean() for sm in samplers]))
-    lp = np.stack(
-        [_group_chain(sm.get_log_prob(discard=burn, thin=thin)[..., None])[:, 0] for sm in samplers]
-    )
-    per_walker = []
-    for sm in samplers:
-        kept = sm.get_chain(discard=burn, thin=thin).shape[0]
-        per_walker.append(np.repeat(sm.acceptance_fraction, kept))  # walker by walker, as in draws
-    return Chains(draws, tau, steps, acc, lp, np.stack(per_walker))
+    draws, lp, per_walker, acc = collect(samplers, burn, thin)
+    return Chains(draws, tau, steps, acc, lp, per_walker)
