@@ -88,3 +88,8 @@ def test_amis_is_a_function_of_its_seed():
     a = amis(_log_target, _guide(3), np.random.default_rng(5))[0]
     b = amis(_log_target, _guide(3), np.random.default_rng(5))[0]
     np.testing.assert_array_equal(a, b)
+
+
+def test_a_target_with_no_support_near_the_guide_is_an_error():
+    with pytest.raises(RuntimeError, match="no draw inside"):
+        amis(lambda z: np.full(z.shape[0], -np.inf), _guide(0), np.random.default_rng(0))

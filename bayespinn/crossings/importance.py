@@ -81,7 +81,7 @@ def amis(log_target, guide: np.ndarray, rng: np.random.Generator, progress: bool
     props: list = []
     Z: list = []
     LT: list = []
-    ess, khat, history = 0.0, math.inf, []
+    ess, khat, history, w = 0.0, math.inf, [], None
     bar = tqdm(total=MAX_ROUNDS, desc="crossing importance", unit="round", leave=False,
                disable=not progress)  # fmt: skip
     for _ in range(MAX_ROUNDS):
@@ -107,6 +107,11 @@ def amis(log_target, guide: np.ndarray, rng: np.random.Generator, progress: bool
         d = z - mean
         cov = (w[:, None] * d).T @ d + 1e-12 * np.eye(mean.size) * float(np.max(np.var(z, 0)))
     bar.close()
+    if w is None:  # no draw of any round inside the support: nothing to weigh
+        raise RuntimeError(
+            "importance sampling found no draw inside the posterior's support "
+            f"in {MAX_ROUNDS} rounds of {N_PER_ROUND}"
+        )
     idx = _systematic(w, N_OUT, rng)
     idx = idx[rng.permutation(idx.size)]
     info = {
