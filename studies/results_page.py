@@ -367,6 +367,16 @@ def _crossings() -> Section:
                 "d",
             )
         )
+    if doc.get("exeter_check"):
+        out += [
+            Entry(
+                "nothing declared: exeter-snr20-seed11's modal EI shift [record sd]",
+                CROSSINGS,
+                "exeter_check.shift_in_record_sd",
+                "+.3f",
+            ),
+            Entry("nothing declared: within 0.3 record sd", CROSSINGS, "exeter_check.within", ""),
+        ]
     if doc.get("joint"):
         out += [
             Entry("joint analysis: crossings", CROSSINGS, "joint.crossings", "d"),
