@@ -160,8 +160,7 @@ def _study_jobs() -> list[Job]:
     out.append(
         Job(
             "crossings",
-            (PY, "studies/crossings.py", "--girders", "3", "--crossings", "10", "--resume",
-             "--out", PAPER),
+            (PY, "studies/crossings.py", "--girders", "3", "--crossings", "10", "--out", PAPER),
             f"{PAPER}/crossings/study.json",
             (f"{PAPER}/crossings/study.json", *crossings),
         )
@@ -237,11 +236,21 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
         return float(doc["runtime_s"]), "its run time"
     if isinstance(doc.get("records"), list) and doc["records"]:
         recs = doc["records"]
+        folder = (
+            ROOT / job.record
+        ).parent  # a study that names its records: one file each beside it
+        recs = [
+            _load(str((folder / f"{r}.json").relative_to(ROOT)))
+            if isinstance(r, str) and (folder / f"{r}.json").is_file()
+            else r
+            for r in recs
+        ]
         t = sum(
             float(r.get("time_s") or 0.0)  # a crossing record: its simulation and both analyses
             + float(r.get("simulate_s") or 0.0)
             + sum(float((r.get(a) or {}).get("runtime_s") or 0.0) for a in ("declared", "today"))
             for r in recs
+            if isinstance(r, dict)
         )
         t += float((doc.get("time_reference") or {}).get("time_s") or 0.0)
         return t, "the sum of its replicates' times"
