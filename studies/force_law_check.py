@@ -27,8 +27,8 @@ model, measured to choose the next change; it is not the reference.
 
     python studies/force_law_check.py --crossings g0-c0 g0-c1 g0-c2 g0-c3 g1-c1 g2-c0 g2-c1 \
         --out reports/paper/diagnostics/force-law-check.json
-    python studies/force_law_check.py --crossings g1-c1 g2-c0 --laws coupled free two-mode \
-        --out reports/paper/diagnostics/force-law-check-coupled-1.json
+    python studies/force_law_check.py --crossings g1-c1 g2-c0 --laws two-mode \
+        --out reports/paper/diagnostics/force-law-check-two-mode-1.json
 """
 
 from __future__ import annotations
