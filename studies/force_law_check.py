@@ -94,12 +94,12 @@ def setup(g: int, k: int):
 def coupled_mode(
     beam, vehicle, EI: float, zeta: float, fb: float, zb: float
 ) -> tuple[float, float]:
-    """(omega [rad/s], damping ratio) of the first mode of the girder's first mode coupled to each axle's
+    """(omega [rad/s], damping ratio) of the girder's first mode coupled to each axle's
     sprung body (mass P_j / g, bounce fb [Hz], damping ratio zb), the lorry centred on the span, frozen
     (the convective terms dropped): the complex eigenvalue of the (1 + J)-degree system nearest the
     girder's first frequency."""
     L, mu = beam.length, beam.mass_per_length
-    w1 = (math.pi / L) ** 2 * math.sqrt(EI / mu)
+    w1 = beam.natural_frequency(1, EI)
     m = np.asarray(vehicle.loads, float) / 9.81
     wb = 2 * math.pi * fb
     x = L / 2 + float(np.max(vehicle.offsets)) / 2 - np.asarray(vehicle.offsets, float)
@@ -141,7 +141,7 @@ class Fit:
         alpha, _, _ = basis_frequencies(b.length / v, term.model.n_basis)
         r = term.y - mu[0]
         J = veh.loads.size
-        w1 = (math.pi / b.length) ** 2 * math.sqrt(EI / b.mass_per_length)
+        w1, k1 = b.natural_frequency(1, EI), math.pi / b.length
         Ta, Tb = t0, t0 + (b.length + float(veh.offsets.max())) / v + TAIL_S
         Lq = (Tb - Ta) / 2
         inside = (self.t >= Ta) & (self.t <= Tb)
@@ -156,9 +156,12 @@ class Fit:
             Rn = shape[:, None] * np.sin(aq[None] * (self.t[:, None] - Ta)) / math.sqrt(Lq)
             return Rn * inside[:, None], aq
 
-        k1 = math.pi / b.length
         Rq, aq = modal_columns(1, w1, BAND)
-        R2, a2 = modal_columns(2, 4 * w1, BAND2) if law == "two-mode" else (Rq[:, :0], aq[:0])
+        R2, a2 = (
+            modal_columns(2, b.natural_frequency(2, EI), BAND2)
+            if law == "two-mode"
+            else (Rq[:, :0], aq[:0])
+        )
         wr, zr = w1, zeta
         if law in ("coupled", "two-mode"):
             fb, zb = float(np.ravel(p["fb"][0])[0]), float(np.ravel(p["zb"][0])[0])
@@ -178,7 +181,7 @@ class Fit:
                 H = spectrum(w1 * math.exp(h[4]), math.exp(h[5])) if law == "free" else H2
                 B = np.concatenate([B, Rq * (math.exp(h[3]) * np.sqrt(H))[None]], 1)
             if law == "two-mode":
-                H = spectrum(4 * w1, math.exp(h[5]), a2)
+                H = spectrum(b.natural_frequency(2, EI), math.exp(h[5]), a2)
                 B = np.concatenate([B, R2 * (math.exp(h[4]) * np.sqrt(H))[None]], 1)
             return B, sig
 

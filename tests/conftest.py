@@ -75,3 +75,19 @@ def smoke_fit():
     # last-layer marginal become too ill-conditioned to be a reference
     res = fit(problem, TrainSettings.for_profile("smoke", optimizer="adam"), seed=0, quiet=True)
     return cfg, data, problem, res
+
+
+@pytest.fixture(scope="module")
+def study(request):
+    """The `studies/` script named by the test module's `STUDY_SCRIPT`, imported with `studies/` on the
+    path while the module's tests run (the scripts import each other by name)."""
+    import importlib
+    import sys
+    from pathlib import Path
+
+    studies = str(Path(__file__).resolve().parents[1] / "studies")
+    sys.path.insert(0, studies)
+    try:
+        yield importlib.import_module(request.module.STUDY_SCRIPT)
+    finally:
+        sys.path.remove(studies)

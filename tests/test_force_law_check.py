@@ -4,29 +4,18 @@ body's mass at its axle's mode-shape value (the mode's frequency falls by sqrt(M
 
 from __future__ import annotations
 
-import importlib
 import math
-import sys
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-STUDIES = Path(__file__).resolve().parents[1] / "studies"
+from bayespinn.config.bridge import Beam
 
+STUDY_SCRIPT = "force_law_check"  # the `study` fixture (conftest.py) imports it
 
-@pytest.fixture(scope="module")
-def flc():
-    sys.path.insert(0, str(STUDIES))
-    try:
-        yield importlib.import_module("force_law_check")
-    finally:
-        sys.path.remove(str(STUDIES))
-
-
-BEAM = SimpleNamespace(length=20.0, mass_per_length=4000.0)
 EI = 5e9
+BEAM = Beam(length=20.0, EI=EI, mass_per_length=4000.0)
 W1 = (math.pi / BEAM.length) ** 2 * math.sqrt(EI / BEAM.mass_per_length)
 
 
@@ -34,15 +23,15 @@ def lorry(loads):
     return SimpleNamespace(loads=np.asarray(loads, float), offsets=np.array([0.0, 4.0]))
 
 
-def test_massless_bodies_leave_the_bare_girder_mode(flc):
-    w, z = flc.coupled_mode(BEAM, lorry([1e-6, 1e-6]), EI, 0.01, 2.5, 0.1)
+def test_massless_bodies_leave_the_bare_girder_mode(study):
+    w, z = study.coupled_mode(BEAM, lorry([1e-6, 1e-6]), EI, 0.01, 2.5, 0.1)
     assert w == pytest.approx(W1, rel=1e-9) and z == pytest.approx(0.01, rel=1e-6)
 
 
-def test_rigid_suspensions_add_the_bodies_mass(flc):
+def test_rigid_suspensions_add_the_bodies_mass(study):
     loads = np.array([60e3, 90e3])
     veh = lorry(loads)
-    w, z = flc.coupled_mode(BEAM, veh, EI, 0.01, 2000.0, 1e-4)
+    w, z = study.coupled_mode(BEAM, veh, EI, 0.01, 2000.0, 1e-4)
     x = BEAM.length / 2 + 2.0 - veh.offsets
     phi = np.sin(math.pi * x / BEAM.length)
     M1 = BEAM.mass_per_length * BEAM.length / 2

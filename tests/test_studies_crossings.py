@@ -6,25 +6,13 @@ summary as a miss or a misfit."""
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import json
-import sys
-from pathlib import Path
 
 import pytest
 
-STUDIES = Path(__file__).resolve().parents[1] / "studies"
+STUDY_SCRIPT = "crossings"  # the `study` fixture (conftest.py) imports it
 
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")
-
-
-@pytest.fixture(scope="module")
-def study():
-    sys.path.insert(0, str(STUDIES))
-    try:
-        yield importlib.import_module("crossings")
-    finally:
-        sys.path.remove(str(STUDIES))
 
 
 def test_draws_are_seeded_and_within_the_stated_tolerances(study):
