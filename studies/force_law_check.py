@@ -12,7 +12,7 @@ under these laws (`--laws`, default the first two):
   (frequency from EI, damping ratio the girder's), on the span's time window from the first axle's entry
   to 1 s after the last one leaves (basis 0.3-2 times the first frequency); its scale is fitted.
 - `coupled`: as `resonant`, but the oscillator is the first mode of the girder coupled to the lorry's
-  sprung bodies (`coupled_mode`, the lorry centred on the span, at the crossing's EI, girder damping and
+  sprung bodies (`bayespinn.crossings.resonance.coupled_mode`, the lorry centred on the span, at the crossing's EI, girder damping and
   suspension): a heavy lorry's dampers raise the mode's frequency and damping well above the bare girder's.
 - `free`: as `resonant`, the oscillator's frequency and damping ratio fitted too (an upper bound on what
   the resonant term's spectrum can explain).
@@ -57,6 +57,7 @@ from bayespinn.crossings.likelihood import (  # noqa: E402
     inertial_spectral_sd,
     woodbury_loglik,
 )
+from bayespinn.crossings.resonance import coupled_mode  # noqa: E402
 from bayespinn.provenance import provenance  # noqa: E402
 from bayespinn.uq.priors import EIPrior, NoisePrior  # noqa: E402
 
@@ -89,38 +90,6 @@ def setup(g: int, k: int):
     for n, v in truth.items():
         th[post.layout.index[n]] = v
     return cfg, d, data, post, th
-
-
-def coupled_mode(
-    beam, vehicle, EI: float, zeta: float, fb: float, zb: float
-) -> tuple[float, float]:
-    """(omega [rad/s], damping ratio) of the girder's first mode coupled to each axle's
-    sprung body (mass P_j / g, bounce fb [Hz], damping ratio zb), the lorry centred on the span, frozen
-    (the convective terms dropped): the complex eigenvalue of the (1 + J)-degree system nearest the
-    girder's first frequency."""
-    L, mu = beam.length, beam.mass_per_length
-    w1 = beam.natural_frequency(1, EI)
-    m = np.asarray(vehicle.loads, float) / 9.81
-    wb = 2 * math.pi * fb
-    x = L / 2 + float(np.max(vehicle.offsets)) / 2 - np.asarray(vehicle.offsets, float)
-    phi = np.where((x > 0) & (x < L), np.sin(math.pi * x / L), 0.0)
-    n = m.size + 1
-    M1 = mu * L / 2
-    Mm = np.diag(np.r_[M1, m])
-    K, C = np.zeros((n, n)), np.zeros((n, n))
-    K[0, 0], C[0, 0] = M1 * w1**2, 2 * zeta * w1 * M1
-    for j in range(m.size):
-        a = np.zeros(n)
-        a[0], a[1 + j] = -phi[j], 1.0
-        K += m[j] * wb**2 * np.outer(a, a)
-        C += 2 * zb * m[j] * wb * np.outer(a, a)
-    A = np.block(
-        [[np.zeros((n, n)), np.eye(n)], [-np.linalg.solve(Mm, K), -np.linalg.solve(Mm, C)]]
-    )
-    ev = np.linalg.eigvals(A)
-    ev = ev[ev.imag > 0]
-    e = ev[np.argmin(np.abs(np.abs(ev) - w1))]
-    return float(abs(e)), float(-e.real / abs(e))
 
 
 class Fit:
@@ -165,7 +134,8 @@ class Fit:
         wr, zr = w1, zeta
         if law in ("coupled", "two-mode"):
             fb, zb = float(np.ravel(p["fb"][0])[0]), float(np.ravel(p["zb"][0])[0])
-            wr, zr = coupled_mode(b, veh, EI, zeta, fb, zb)
+            wr, zr = (float(a[0]) for a in coupled_mode(
+                b.length, b.mass_per_length, veh.loads, veh.offsets, EI, zeta, fb, zb))  # fmt: skip
 
         def spectrum(w, z, a=aq):
             H2 = 1.0 / ((w**2 - a**2) ** 2 + (2 * z * w * a) ** 2)

@@ -23,7 +23,7 @@ from bayespinn import vbi
 from bayespinn.config import Road
 from bayespinn.crossings.forward import CrossingModel
 from bayespinn.crossings.interaction import interaction_response
-from bayespinn.crossings.likelihood import CrossingsLogPosterior, inertial_spectral_sd
+from bayespinn.crossings.likelihood import CrossingsLogPosterior
 from bayespinn.crossings.linearised import Linearisation, exact_loglik
 from bayespinn.crossings.reference import _terms
 from bayespinn.uq.priors import EIPrior, NoisePrior
@@ -110,13 +110,15 @@ def small_post(crossing):
     th[L.index[f"t0[{c.name}]"]] = veh.entry_time
     th[L.index[f"log_fb[{c.name}]"]] = math.log(2.0)
     th[L.index[f"log_zb[{c.name}]"]] = math.log(0.08)
+    th[L.index["log_q1"]], th[L.index["log_q2"]] = math.log(0.05), math.log(0.1)
+    th[L.index["log_z2"]] = math.log(0.02)
     return post, th
 
 
 def _dense_evidence(lin: Linearisation, post, h: np.ndarray) -> float:
     """log N(r; X mu, sigma^2 I + X P^-1 X') of the linear model, written out densely."""
     c, b = post.terms[0], lin.blocks[0]
-    s, ell, sig = np.exp(h[:3])
+    sig = math.exp(h[2])
     th = lin.theta
     L = post.layout
     cols = lin.shared + b.own
@@ -135,12 +137,9 @@ def _dense_evidence(lin: Linearisation, post, h: np.ndarray) -> float:
     mu0, R = c.responses(
         {k: [a[:1] for a in v] if isinstance(v, list) else v[:1] for k, v in p.items()}, 0
     )
-    from bayespinn.crossings.forward import basis_frequencies
-
-    alpha, _, _ = basis_frequencies(np.array([c.model.L / p["v"][0][0]]), c.model.n_basis)
-    d = np.tile(
-        inertial_spectral_sd(alpha, np.array([s]), np.array([ell])), (1, c.model.loads.size)
-    )[0]
+    full = th.copy()
+    full[lin.hyper] = h
+    d = c.column_sds(post.unpack(full[None]), 0)[0]
     X = np.concatenate([J.T, R[0] * d[None]], axis=1)
     prior_mean = np.concatenate(
         [lin.shared_mean - th[lin.shared], b.own_mean - th[b.own], np.zeros(R.shape[2])]

@@ -10,7 +10,9 @@ D = diag of the spectral density at the basis frequencies; the Woodbury identity
 J m. The kernel is the second time derivative of a squared exponential (spectral density proportional to
 s^2 l (l w)^4 exp(-(l w)^2 / 2), variance s^2): a sprung body's dynamic force is its mass times an
 acceleration, so it has no power at zero frequency (it does not change the mean load over a crossing, which
-the stated axle loads and `load_rel_sd` describe) and a peak at w = 2 / l.
+the stated axle loads and `load_rel_sd` describe) and a peak at w = 2 / l. With the forces fluctuating, the
+first two modes' resonant responses to force content beyond that basis (`resonance`) are integrated out
+the same way: their columns join the basis, their sds the spectral ones.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ import numpy as np
 from ..uq.priors import EIPrior, NoisePrior
 from .forward import CrossingModel, basis_frequencies
 from .interaction import interaction_response
+from .resonance import AMPLITUDE_LOG_SD, AMPLITUDE_MEDIAN, Resonance
+from .resonance import NAMES as RESONANT_NAMES
 
 #: the force time scale's prior: log-normal, median FORCE_L_MEDIAN [s], log-sd FORCE_L_LOG_SD, truncated
 #: below at FORCE_L_MIN (the spectral peak 2 / l at most 2.7 Hz there, above a lorry body's bounce)
@@ -73,6 +77,7 @@ class CrossingTerm:
     sprung: bool = False
     body_frequency: float = 2.5
     body_damping: float = 0.1
+    resonance: Resonance | None = None
 
     @property
     def own(self) -> list[tuple[str, float, float]]:
@@ -99,12 +104,26 @@ class CrossingTerm:
         return mu
 
     def responses(self, p: dict, i: int):
-        """`predict` and the force basis' responses (W, n, M)."""
+        """`predict` and the force basis' responses (W, n, M), the resonant terms' columns last."""
         args = (p["EI"], p["zeta"], p["v"][i], p["t0"][i])
         mu, R = self.model.responses(*args, basis=True)
         if self.sprung:
             mu = mu + interaction_response(self.model, *args, p["fb"][i], p["zb"][i])
+        if self.resonance is not None:
+            t0 = np.broadcast_to(np.asarray(p["t0"][i], float), mu.shape[:1])
+            R = np.concatenate([R, self.resonance.columns(self.model, t0)], axis=2)
         return mu, R
+
+    def column_sds(self, p: dict, i: int) -> np.ndarray:
+        """The prior sds (W, M) of the weights on `responses`' columns: the force spectrum's at the basis
+        frequencies (the same for every axle), then the resonant terms'."""
+        alpha, _, _ = basis_frequencies(self.model.L / p["v"][i], self.model.n_basis)
+        d = np.tile(inertial_spectral_sd(alpha, p["s"], p["l"]), (1, self.model.loads.size))
+        if self.resonance is None:
+            return d
+        body = (p["fb"][i], p["zb"][i]) if self.sprung else None
+        dr = self.resonance.sds(p["EI"], p["zeta"], p["q1"], p["q2"], p["z2"], body)
+        return np.concatenate([d, dr], axis=1)
 
 
 class Layout:
@@ -116,6 +135,8 @@ class Layout:
             names.append("log_zeta")
         if forces:
             names += ["log_s", "log_l", "log_sigma"]
+            if any(c.resonance is not None for c in terms):
+                names += list(RESONANT_NAMES)
         for c in terms:
             names += [n for n, _, _ in c.own]
         self.names = names
@@ -139,10 +160,14 @@ class CrossingsLogPosterior:
         zeta_known: float,
         damping_prior: tuple[float, float] | None,
         forces: bool,
+        mode_damping_prior: tuple[float, float] = (0.01, 1.0),
     ):
+        """mode_damping_prior: (median, log-sd) of the second mode's damping ratio (its resonant term)."""
         self.terms, self.ei_prior, self.noise_prior = terms, ei_prior, noise_prior
         self.zeta_known, self.damping_prior, self.forces = zeta_known, damping_prior, forces
+        self.mode_damping_prior = mode_damping_prior
         self.layout = Layout(terms, damping_prior is not None, forces)
+        self.resonant = "log_q1" in self.layout.index
         self.n = int(sum(c.y.size for c in terms))
 
     def unpack(self, theta: np.ndarray) -> dict:
@@ -168,6 +193,9 @@ class CrossingsLogPosterior:
             out["s"] = np.exp(th[:, L.index["log_s"]])
             out["l"] = np.exp(th[:, L.index["log_l"]])
             out["sigma"] = np.exp(th[:, L.index["log_sigma"]])
+        if self.resonant:
+            for k in ("q1", "q2", "z2"):
+                out[k] = np.exp(th[:, L.index[f"log_{k}"]])
         return out
 
     def log_prior(self, theta: np.ndarray) -> np.ndarray:
@@ -189,6 +217,12 @@ class CrossingsLogPosterior:
                 -np.inf,
             )
             lp = lp + self.noise_prior.logpdf(th[:, L.index["log_sigma"]])
+        if self.resonant:
+            for k in ("log_q1", "log_q2"):
+                lp = lp + _normal(th[:, L.index[k]], math.log(AMPLITUDE_MEDIAN), AMPLITUDE_LOG_SD)
+            lz2 = th[:, L.index["log_z2"]]
+            med, sd = self.mode_damping_prior
+            lp = np.where(lz2 < math.log(0.5), lp + _normal(lz2, math.log(med), sd), -np.inf)
         for c in self.terms:
             for name, mean, sd in c.own:
                 lp = lp + _normal(th[:, L.index[name]], mean, sd)
@@ -202,10 +236,7 @@ class CrossingsLogPosterior:
         for i, c in enumerate(self.terms):
             if basis and self.forces:
                 mu, R = c.responses(p, i)
-                alpha, _, _ = basis_frequencies(c.model.L / p["v"][i], c.model.n_basis)
-                d = inertial_spectral_sd(alpha, p["s"], p["l"])  # (W, m), the same for every axle
-                R = R * np.tile(d, (1, c.model.loads.size))[:, None, :]
-                out.append((c.y[None, :] - mu, R))
+                out.append((c.y[None, :] - mu, R * c.column_sds(p, i)[:, None, :]))
             else:
                 out.append((c.y[None, :] - c.predict(p, i), None))
         return out

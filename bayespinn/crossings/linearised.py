@@ -32,17 +32,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from .curvature import curvature_sds
-from .forward import basis_frequencies
 from .likelihood import (
     BODY_DAMPING_LOG_SD,
     BODY_FREQUENCY_LOG_SD,
     CrossingsLogPosterior,
-    inertial_spectral_sd,
     rows_of,
     woodbury_loglik,
 )
+from .resonance import NAMES as RESONANT_NAMES
 
 HYPER = ("log_s", "log_l", "log_sigma")
+
+
+def hyper_names(post: CrossingsLogPosterior) -> tuple[str, ...]:
+    """The hyperparameters emcee samples: the force law's and the noise sd, then the resonant terms'."""
+    return HYPER + (RESONANT_NAMES if post.resonant else ())
+
+
 #: re-linearise until theta* moves by less than this fraction of its conditional sd (at most MAX_ROUNDS)
 MOVE_TOL, MAX_ROUNDS = 0.05, 6
 #: joint draws whose exact likelihood checks the linearisation
@@ -67,11 +73,10 @@ class Block:
     g: np.ndarray
     rr: float
     n: int
-    alpha: np.ndarray
-    axles: int
     own_mean: np.ndarray
     own_sd: np.ndarray
     table: dict | None = None
+    term: int = 0
 
     def data_terms(self, u: np.ndarray | None):
         """X'r (W, K) and r'r (W,) at the suspension's scaled coordinates u (W, 2) (None: at theta*)."""
@@ -113,7 +118,7 @@ class Linearisation:
         L = post.layout
         self.theta = np.asarray(theta, float).copy()
         self.tabulate = tabulate
-        self.hyper = [L.index[n] for n in HYPER]
+        self.hyper = [L.index[n] for n in hyper_names(post)]
         if (
             tabulate
         ):  # a sprung crossing's suspension is sampled with the hyperparameters, tabulated
@@ -151,11 +156,10 @@ class Linearisation:
         mu0, R = c.responses(first, i)
         X = np.concatenate([J.T, R[0]], axis=1)
         r = c.y - mu0[0]
-        alpha, _, _ = basis_frequencies(np.array([c.model.L / p["v"][i][0]]), c.model.n_basis)
         table = self._table(i, c, first, X, r) if self.tabulate and c.sprung else None
         return Block(
-            own, X.T @ X, X.T @ r, float(r @ r), c.y.size, alpha, c.model.loads.size,
-            np.array(mean, float), np.array(sd, float), table,
+            own, X.T @ X, X.T @ r, float(r @ r), c.y.size,
+            np.array(mean, float), np.array(sd, float), table, i,
         )  # fmt: skip
 
     def _table(self, i: int, c, first: dict, X: np.ndarray, r: np.ndarray) -> dict:
@@ -205,13 +209,14 @@ class Linearisation:
         return (hyper[:, cols] - t["center"]) / t["half"]
 
     # ------------------------------------------------------------------------------- the pieces
-    def _scale(self, b: Block, s: np.ndarray, ell: np.ndarray) -> np.ndarray:
-        """Column scales (W, K): 1 on theta's columns, the spectral sds on the weights'."""
-        W = s.size
-        d = inertial_spectral_sd(np.repeat(b.alpha, W, 0), s, ell)
-        return np.concatenate(
-            [np.ones((W, len(self.shared) + len(b.own))), np.tile(d, (1, b.axles))], 1
-        )
+    def _scale(self, b: Block, hyper: np.ndarray) -> np.ndarray:
+        """Column scales (W, K): 1 on theta's columns, the weights' prior sds on theirs, at theta* with
+        the hyperparameters (W, H) in their columns."""
+        W = hyper.shape[0]
+        full = np.repeat(self.theta[None], W, 0)
+        full[:, self.hyper] = hyper
+        d = self.post.terms[b.term].column_sds(self.post.unpack(full), b.term)
+        return np.concatenate([np.ones((W, len(self.shared) + len(b.own))), d], 1)
 
     def _local(self, b: Block, sc: np.ndarray, s2: np.ndarray, g0: np.ndarray):
         """The crossing's own block: A_oo, c_o, A_so (W-batched) and its prior terms."""
@@ -228,9 +233,8 @@ class Linearisation:
     def _solve(self, hyper: np.ndarray):
         """Everything the evidence and the conditionals need at hyperparameters (W, 3)."""
         hyper = np.atleast_2d(hyper)
-        s, ell, sig = np.exp(hyper[:, :3]).T
-        s2 = sig**2
-        W = s.size
+        s2 = np.exp(2 * hyper[:, 2])
+        W = s2.size
         p_s = 1.0 / self.shared_sd**2
         m_s = self.shared_mean - self.theta[self.shared]
         A_ss = np.repeat(np.diag(p_s)[None], W, 0)
@@ -241,7 +245,7 @@ class Linearisation:
         const -= 0.5 * float(np.sum(p_s * m_s**2))
         local = []
         for b in self.blocks:
-            sc = self._scale(b, s, ell)
+            sc = self._scale(b, hyper)
             g0, rr = b.data_terms(self._u(b, hyper) if b.table is not None else None)
             if g0.shape[0] != W:
                 g0 = np.repeat(g0[:1], W, 0)
@@ -293,8 +297,7 @@ class Linearisation:
     def loglik(self, theta: np.ndarray) -> np.ndarray:
         """log p_lin(y | theta, h) with the weights integrated out, for full rows (W, D)."""
         th = np.atleast_2d(theta)
-        s, ell, sig = np.exp(th[:, self.hyper[:3]]).T
-        s2 = sig**2
+        s2 = np.exp(2 * th[:, self.hyper[2]])
         out = -0.5 * self.n * np.log(2 * math.pi * s2)
         for b in self.blocks:
             cols = self.shared + b.own
@@ -307,7 +310,7 @@ class Linearisation:
                 rr0 = np.repeat(rr0[:1], th.shape[0], 0)
             rr = rr0 - 2 * np.einsum("wk,wk->w", delta, g0[:, :k])
             rr = rr + np.einsum("wi,ij,wj->w", delta, G_JJ, delta)
-            d = self._scale(b, s, ell)[:, k:]
+            d = self._scale(b, th[:, self.hyper])[:, k:]
             bvec = d * (g0[:, k:] - delta @ G_RJ.T)
             G = G_RR[None] * d[:, :, None] * d[:, None, :]
             A = G / s2[:, None, None] + np.eye(G.shape[1])[None]
@@ -400,7 +403,7 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
     from ..uq.sampler import sample
 
     theta = np.asarray(theta0, float).copy()
-    hyp = [post.layout.index[n] for n in HYPER]
+    hyp = [post.layout.index[n] for n in hyper_names(post)]
     h = theta[hyp]
     moves = []
     for _ in range(MAX_ROUNDS):

@@ -21,8 +21,8 @@ from ..data.measurements import Measurements
 from ..physics.loads import quantity_weights
 from ..uq import fitcheck
 from ..uq.posterior import Posterior
-from .forward import CrossingModel, basis_frequencies
-from .likelihood import CrossingsLogPosterior, inertial_spectral_sd, rows_of
+from .forward import CrossingModel
+from .likelihood import CrossingsLogPosterior, rows_of
 
 #: walkers per vectorised call of the forward model
 CHUNK = 16
@@ -80,9 +80,7 @@ class CrossingsPredictor:
                 out.append(view.predict(sub, i))
                 continue
             mu, R = view.responses(sub, i)
-            m = self.mean
-            alpha, _, _ = basis_frequencies(c.model.L / m["v"][i], nb)
-            d = np.tile(inertial_spectral_sd(alpha, m["s"], m["l"]), (1, c.model.loads.size))
+            d = view.column_sds(self.mean, i)
             out.append(mu + R @ (d[0] * self.weights[i]))
         return np.concatenate(out, axis=0)
 

@@ -39,6 +39,8 @@ from .checks import (  # noqa: F401  (re-exported: the package's names)
 from .curvature import curvature_sds
 from .forward import CrossingModel
 from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_basis_for
+from .resonance import AMPLITUDE_MEDIAN, Resonance
+from .resonance import NAMES as RESONANT_NAMES
 
 #: modal truncation below this fraction of the noise sd (as `uq.modal_mcmc`)
 TRUNCATION_FRACTION = 0.01
@@ -63,6 +65,11 @@ def _terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[
             data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
             basis_modes=min(n_modes, BASIS_MODES),
         )  # fmt: skip
+        res = (
+            Resonance.build(model, veh.speed, veh.entry_time, cfg.prior.EI_median)
+            if forces
+            else None
+        )
         out.append(
             CrossingTerm(
                 name,
@@ -76,6 +83,7 @@ def _terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[
                 sprung=veh.model == "sprung",
                 body_frequency=veh.body_frequency,
                 body_damping=veh.body_damping,
+                resonance=res,
             )  # fmt: skip
         )
     return out
@@ -110,7 +118,8 @@ def _rss_profile(post: CrossingsLogPosterior, theta: np.ndarray) -> np.ndarray:
 def _least_squares(post: CrossingsLogPosterior, th0: np.ndarray) -> tuple[np.ndarray, float]:
     """The constant-force parameters' maximum (Gauss-Newton on residuals / sigma and the priors as
     pseudo-residuals, sigma from the fit), and sigma there."""
-    idx = [i for i, n in enumerate(post.layout.names) if n not in ("log_s", "log_l", "log_sigma")]
+    hyper = ("log_s", "log_l", "log_sigma", *RESONANT_NAMES)
+    idx = [i for i, n in enumerate(post.layout.names) if n not in hyper]
     base = th0.copy()
 
     def full(z: np.ndarray) -> np.ndarray:
@@ -281,11 +290,15 @@ def crossings_reference(
     )
     ei_prior = EIPrior.from_spec(cfg.prior)
     noise = NoisePrior.build("vague", np.asarray(data.value, float))
+    # the second mode's damping ratio (its resonant term): the damping prior's law about the damping
+    # the analysis is told or infers
+    mode_damping = (damping[0] if damping else cfg.beam.damping_ratio, cfg.prior.damping_log_sd)
 
     def post_of(n_modes: int) -> CrossingsLogPosterior:
         return CrossingsLogPosterior(
             _terms(cfg, data, n_modes, forces), ei_prior, noise,
             zeta_known=cfg.beam.damping_ratio, damping_prior=damping, forces=forces,
+            mode_damping_prior=mode_damping,
         )  # fmt: skip
 
     post = post_of(8)
@@ -302,6 +315,9 @@ def crossings_reference(
         th[L.index["log_s"]] = math.log(0.5 * 0.05)
         th[L.index["log_l"]] = math.log(FORCE_L_MEDIAN)
         th[L.index["log_sigma"]] = math.log(sigma)
+        if post.resonant:
+            th[L.index["log_q1"]] = th[L.index["log_q2"]] = math.log(AMPLITUDE_MEDIAN)
+            th[L.index["log_z2"]] = math.log(mode_damping[0])
     h = np.array([_step(n, post) for n in L.names])
     if laplace is None:
         kind = "linearised" if forces else ("laplace" if len(post.terms) > 1 else "emcee")
@@ -479,5 +495,7 @@ def _step(name: str, post: CrossingsLogPosterior) -> float:
     if name.startswith("log_v["):
         return 1e-5
     if name.startswith(("log_fb[", "log_zb[")):
+        return 1e-2
+    if name in RESONANT_NAMES:
         return 1e-2
     return {"log_EI": 1e-4, "log_zeta": 1e-2, "log_s": 1e-2, "log_l": 1e-2, "log_sigma": 1e-3}[name]
