@@ -22,8 +22,8 @@ under these laws (`--laws`, default the first two):
 
 Per law: the log marginal likelihood at its maximum, the fitted response's RMS error against the
 noise-free truth in noise sds, and the log EI profile (hyperparameters re-fitted at each of 9 points
-within +-0.8 %; its quadratic fit's peak and sd). This is a check of a force law not in the analysis
-model, measured to choose the next change; it is not the reference.
+within +-0.8 %; its quadratic fit's peak and sd). This check chose the law the reference now
+carries (`two-mode`, `bayespinn.crossings.resonance`); it is not the reference.
 
     python studies/force_law_check.py --crossings g0-c0 g0-c1 g0-c2 g0-c3 g1-c1 g2-c0 g2-c1 \
         --out reports/paper/diagnostics/force-law-check.json
