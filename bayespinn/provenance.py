@@ -105,12 +105,15 @@ def now() -> str:
 
 
 def provenance(device: str = "cpu") -> dict:
-    """The provenance block every record carries: date, git commit and dirty flag, package versions and
-    machine. Command, seed and configuration are the caller's to add (they belong to the record)."""
+    """The provenance block every record carries: date, git commit and dirty flag of the code this process
+    imported (`code_commit`: a commit or an edit made while a long study runs is not the code that
+    computed its records), package versions and machine. Command, seed and configuration are the
+    caller's to add (they belong to the record)."""
+    code = code_commit()
     return {
         "date": now(),
-        "git_commit": git_commit(),
-        "git_dirty": git_dirty(),
+        "git_commit": code["commit"],
+        "git_dirty": code["dirty"],
         "versions": versions(),
         "machine": machine(device),
     }
@@ -139,3 +142,8 @@ def commits(records: list[dict]) -> dict[str, int]:
 def commits_text(counts: dict[str, int]) -> str:
     """`commits` as a page prints it: "0d1940b5c2a1 (58), unrecorded (42)"."""
     return ", ".join(f"{k} ({v})" for k, v in counts.items()) or "none"
+
+
+# read when the package is imported, before a long run's first record: the code a process computes with
+# is the code it imported, whatever is committed or edited while it runs
+code_commit()

@@ -49,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common as c  # noqa: E402
 import crossings as S  # noqa: E402
 
-from bayespinn.crossings import reference as R  # noqa: E402
+from bayespinn.crossings import peak  # noqa: E402
 from bayespinn.crossings.forward import basis_frequencies  # noqa: E402
 from bayespinn.crossings.likelihood import (  # noqa: E402
     FORCE_L_MIN,
@@ -72,7 +72,7 @@ def setup(g: int, k: int):
     data = S.simulate(S.truth_config(gcfg, d), SNR, d["data_seed"], False)
     cfg = S.stated_config(gcfg, d, True, "fluctuating", "sprung")
     post = CrossingsLogPosterior(
-        R._terms(cfg, data, 8, True), EIPrior.from_spec(cfg.prior),
+        peak.terms(cfg, data, 8, True), EIPrior.from_spec(cfg.prior),
         NoisePrior.build("vague", np.asarray(data.value, float)),
         zeta_known=cfg.beam.damping_ratio,
         damping_prior=(cfg.prior.damping_median, cfg.prior.damping_log_sd), forces=True,

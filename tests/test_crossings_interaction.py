@@ -25,7 +25,7 @@ from bayespinn.crossings.forward import CrossingModel
 from bayespinn.crossings.interaction import interaction_response
 from bayespinn.crossings.likelihood import CrossingsLogPosterior
 from bayespinn.crossings.linearised import Linearisation, exact_loglik
-from bayespinn.crossings.reference import _terms
+from bayespinn.crossings.peak import terms as _terms
 from bayespinn.uq.priors import EIPrior, NoisePrior
 
 #: the interaction's relative RMS error between the two codes: measured 0.05 on the Exeter girder at

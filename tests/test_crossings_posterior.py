@@ -147,10 +147,14 @@ def test_a_failed_linearisation_is_replaced_by_the_exact_posterior(monkeypatch):
     the exact posterior is then importance-sampled from the linearised draws. On these data the
     linearisation is good (it passes its check unpatched, see above), so the exact posterior's log EI
     must agree with the linearised one within 0.3 of its sd, its sd within 20 %, and the analysis be
-    converged by the sampler's own check."""
-    from bayespinn.crossings import linearised
+    converged by the sampler's own check. The girder's resonant terms are left out here: their amplitudes
+    scale with 1 / EI, which the linearisation holds at its point, so with them the linearised posterior
+    is not an accurate reference for the exact one (measured: its log EI sd 18 % under the exact one's on
+    these data), while the mechanism tested here is the same."""
+    from bayespinn.crossings import linearised, resonance
 
     monkeypatch.setattr(linearised, "ESS_MIN_FRACTION", 1.01)
+    monkeypatch.setattr(resonance, "MODES", 0)
     cfg, data, fl = _fluctuating_crossing()
     ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
     d = ref.diagnostics
@@ -165,10 +169,11 @@ def test_a_failed_linearisation_is_replaced_by_the_exact_posterior(monkeypatch):
 def test_an_importance_sampler_that_fails_its_check_is_not_converged(monkeypatch):
     """Negative control: the linearisation rejected as above and the importance sampler held to one round
     with an effective sample size it cannot reach: the analysis must say it has not converged, naming
-    the check, rather than report those draws as the posterior."""
-    from bayespinn.crossings import importance, linearised
+    the check, rather than report those draws as the posterior (the resonant terms left out as above)."""
+    from bayespinn.crossings import importance, linearised, resonance
 
     monkeypatch.setattr(linearised, "ESS_MIN_FRACTION", 1.01)
+    monkeypatch.setattr(resonance, "MODES", 0)
     monkeypatch.setattr(importance, "MAX_ROUNDS", 1)
     monkeypatch.setattr(importance, "ESS_TARGET", 1e9)
     cfg, data, fl = _fluctuating_crossing()

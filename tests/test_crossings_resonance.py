@@ -117,3 +117,16 @@ def test_a_resonant_response_is_what_the_term_explains(gauges):
     assert with_term - without > 1000
     w = np.linalg.solve(B[0].T @ B[0] + sig**2 * np.eye(B.shape[2]), B[0].T @ y)
     assert float(np.std(B[0] @ w - truth)) < 0.3 * sig
+
+
+def test_an_undamped_mode_takes_the_limit_of_light_damping(gauges):
+    _, res = gauges
+    one = np.ones(1)
+
+    def sds(z):
+        return res.sds(one * EI, z, one * 0.05, one * 0.05, one * z)[0]
+
+    d0 = sds(0.0)
+    assert np.all(np.isfinite(d0)) and np.all(d0 > 0)
+    assert np.allclose(d0, sds(1e-5), rtol=1e-3)
+    assert not np.allclose(d0, sds(0.05), rtol=0.1)  # the negative control: real damping widens it

@@ -26,6 +26,8 @@ from .likelihood import CrossingsLogPosterior, rows_of
 
 #: walkers per vectorised call of the forward model
 CHUNK = 16
+#: modes carried by the predictions (reports, fit check), at least
+PREDICT_MODES = 24
 
 
 class CrossingsPredictor:
@@ -70,7 +72,7 @@ class CrossingsPredictor:
         nb = c.model.n_basis if self.weights is not None else 0
         model = CrossingModel(
             c.model.L, c.model.mu, c.model.loads, c.model.offsets, x, t, a_u, a_xx,
-            n_modes=max(c.model.n_modes, 24), n_basis=nb, basis_modes=c.model.basis_modes,
+            n_modes=max(c.model.n_modes, PREDICT_MODES), n_basis=nb, basis_modes=c.model.basis_modes,
         )  # fmt: skip
         view = dataclasses.replace(c, model=model)
         out = []

@@ -1,13 +1,17 @@
 """The modal reference for real crossings: EI with what a recording leaves uncertain (the speed, the entry
-time on the data's clock, the damping ratio, the axles' dynamic forces), one or several crossings.
+time on the data's clock, the damping ratio, the axles' dynamic forces and the girder's resonant response
+to them), one or several crossings.
 
-`crossings_reference(data, cfg, seed=...)` finds the maximum of the posterior (EI profiled on a grid at the
-stated values, then least squares with the priors as pseudo-observations), takes a Laplace scale from a
-finite-difference Hessian, and runs emcee (`uq.sampler.sample`, the reference's driver) on every inferred
-parameter at once. With constant forces the noise sd is integrated out and drawn afterwards from its exact
-inverse-gamma conditional; with fluctuating forces it is sampled with the force fluctuation's scale and time
-scale. EI, damping, noise and the fluctuation's law are shared by all crossings; speed and entry time are
-each crossing's own.
+`crossings_reference(data, cfg, seed=...)` finds the maximum of the posterior (`peak`: EI profiled on a
+grid at the stated values, then least squares with the priors as pseudo-observations) and samples from
+there. With constant forces: emcee (`uq.sampler.sample`, the reference's driver) on every inferred
+parameter, the noise sd integrated out and drawn afterwards from its exact inverse-gamma conditional, or
+with several crossings each one's speed and entry time by Laplace (`laplace`). With fluctuating forces the
+forces and the resonant terms (`resonance`) are integrated out exactly; the rest is linearised
+(`linearised`: emcee on the hyperparameters, the other parameters from their Gaussian conditional) and,
+where that fails its importance check, the exact posterior is importance-sampled (`importance`). EI,
+damping, noise and the force law are shared by all crossings; speed, entry time and suspension are each
+crossing's own.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares, minimize
+from scipy.optimize import minimize
 
 from .. import seeding
 from ..config import Config
@@ -29,6 +33,7 @@ from ..threads import one_blas_thread
 from ..uq.posterior import Posterior, mcmc_diagnostics, summarise
 from ..uq.priors import EIPrior, NoisePrior, prior_only
 from ..uq.sampler import ESS_MIN, RHAT_MAX, MCMCSettings, sample
+from . import peak
 from .checks import (  # noqa: F401  (re-exported: the package's names)
     check_crossings,
     check_ei_field,
@@ -36,160 +41,11 @@ from .checks import (  # noqa: F401  (re-exported: the package's names)
     refuse_crossings,
     split_crossings,
 )
-from .curvature import curvature_sds
-from .forward import CrossingModel
-from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_basis_for
-from .resonance import AMPLITUDE_MEDIAN, Resonance
-from .resonance import NAMES as RESONANT_NAMES
+from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior
+from .resonance import AMPLITUDE_MEDIAN
 
-#: modal truncation below this fraction of the noise sd (as `uq.modal_mcmc`)
-TRUNCATION_FRACTION = 0.01
-#: modes in the dynamic correction of the force-basis responses: the fluctuation's spectrum lies below
-#: 4 / FORCE_L_MIN = 33 rad/s, under the first mode (63 rad/s for the Exeter girder) and far under the
-#: second; the first mode alone leaves 0.2 % of those responses (strain gauges, against 24 modes), some
-#: 4e-5 of the signal, while no mode at all would leave 15 %
-BASIS_MODES = 1
 #: chains the importance sampler's resampled draws are split into (a layout, not independent chains)
 IMPORTANCE_CHAINS = 4
-#: modes carried by the predictor (reports, fit check)
-PREDICT_MODES = 24
-
-
-def _terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[CrossingTerm]:
-    a_u, a_xx = data.weights
-    out = []
-    for name, rows, veh in split_crossings(cfg, data):
-        nb = n_basis_for(cfg.beam.length / veh.speed) if forces else 0
-        model = CrossingModel(
-            cfg.beam.length, cfg.beam.mass_per_length, veh.loads, veh.offsets,
-            data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
-            basis_modes=min(n_modes, BASIS_MODES),
-        )  # fmt: skip
-        res = (
-            Resonance.build(model, veh.speed, veh.entry_time, cfg.prior.EI_median)
-            if forces
-            else None
-        )
-        out.append(
-            CrossingTerm(
-                name,
-                rows,
-                np.asarray(data.value, float)[rows],
-                model,
-                veh.speed,
-                veh.speed_sd,
-                veh.entry_time,
-                veh.entry_time_sd,
-                sprung=veh.model == "sprung",
-                body_frequency=veh.body_frequency,
-                body_damping=veh.body_damping,
-                resonance=res,
-            )  # fmt: skip
-        )
-    return out
-
-
-def _start(post: CrossingsLogPosterior, cfg: Config) -> np.ndarray:
-    """The stated values, with log EI the best of a grid over the prior (the other parameters stated)."""
-    L = post.layout
-    th = np.zeros(L.dim)
-    for c in post.terms:
-        if f"log_v[{c.name}]" in L.index:
-            th[L.index[f"log_v[{c.name}]"]] = math.log(c.speed)
-        if f"t0[{c.name}]" in L.index:
-            th[L.index[f"t0[{c.name}]"]] = c.entry_time
-    if "log_zeta" in L.index:
-        th[L.index["log_zeta"]] = math.log(cfg.prior.damping_median)
-    grid = post.ei_prior.loc + post.ei_prior.log_sd * np.linspace(-5, 5, 401)
-    cand = np.repeat(th[None], grid.size, 0)
-    cand[:, 0] = grid
-    prof = np.concatenate(
-        [_rss_profile(post, c) for c in np.array_split(cand, max(1, grid.size // 32))]
-    ) + post.ei_prior.logpdf(grid)
-    th[0] = grid[int(np.argmax(prof))]
-    return th
-
-
-def _rss_profile(post: CrossingsLogPosterior, theta: np.ndarray) -> np.ndarray:
-    rss = sum(np.einsum("wp,wp->w", r, r) for r, _ in post.residuals(theta))
-    return -0.5 * post.n * np.log(rss)
-
-
-def _least_squares(post: CrossingsLogPosterior, th0: np.ndarray) -> tuple[np.ndarray, float]:
-    """The constant-force parameters' maximum (Gauss-Newton on residuals / sigma and the priors as
-    pseudo-residuals, sigma from the fit), and sigma there."""
-    hyper = ("log_s", "log_l", "log_sigma", *RESONANT_NAMES)
-    idx = [i for i, n in enumerate(post.layout.names) if n not in hyper]
-    base = th0.copy()
-
-    def full(z: np.ndarray) -> np.ndarray:
-        th = np.repeat(base[None], z.shape[0], 0)
-        th[:, idx] = z
-        return th
-
-    sigma = 1.0
-    for _ in range(2):  # sigma from the fit, then the fit with that sigma
-        rss = sum(float(np.sum(r**2)) for r, _ in post.residuals(full(th0[idx][None])))
-        sigma = math.sqrt(rss / post.n)
-
-        def fun(z, sigma=sigma):
-            th = full(np.atleast_2d(z))
-            r = np.concatenate([r for r, _ in post.residuals(th)], axis=1)[0] / sigma
-            return np.concatenate([r, _prior_residuals(post, th[0])])
-
-        def jac(z, sigma=sigma):
-            return _jacobian(post, full, idx, z, sigma)
-
-        fit = least_squares(
-            fun, th0[idx], jac=jac, method="lm", xtol=1e-12, ftol=1e-12, max_nfev=200
-        )
-        th0 = th0.copy()
-        th0[idx] = fit.x
-    return th0, sigma
-
-
-def _jacobian(post: CrossingsLogPosterior, full, idx: list[int], z: np.ndarray, sigma: float):
-    """Central-difference Jacobian of `_least_squares`' residuals: each crossing's rows only against the
-    shared parameters and its own (the rest of its block is zero), one vectorised call per crossing."""
-    names = [post.layout.names[i] for i in idx]
-    h = 1e-6 * np.maximum(1.0, np.abs(z))
-    Z = np.repeat(np.atleast_2d(z), 2 * z.size, 0)
-    for i in range(z.size):
-        Z[2 * i, i] += h[i]
-        Z[2 * i + 1, i] -= h[i]
-    th = full(Z)
-    n_obs = sum(c.y.size for c in post.terms)
-    P = np.stack([_prior_residuals(post, t) for t in th])
-    J = np.zeros((n_obs + P.shape[1], z.size))
-    J[n_obs:] = ((P[0::2] - P[1::2]) / (2 * h[:, None])).T
-    row = 0
-    for ci, c in enumerate(post.terms):
-        need = [k for k, n in enumerate(names) if "[" not in n or n.endswith(f"[{c.name}]")]
-        sel = np.ravel([[2 * k, 2 * k + 1] for k in need])
-        p = post.unpack(th[sel])
-        mu = c.predict(p, ci)
-        J[row : row + c.y.size, need] = (-(mu[0::2] - mu[1::2]) / (2 * h[need, None] * sigma)).T
-        row += c.y.size
-    return J
-
-
-def _prior_residuals(post: CrossingsLogPosterior, th: np.ndarray) -> np.ndarray:
-    """sqrt(-2 log prior) terms of the normal priors on the constant-force parameters (pseudo-residuals)."""
-    L = post.layout
-    out = [(th[0] - post.ei_prior.loc) / post.ei_prior.log_sd]
-    if "log_zeta" in L.index:
-        med, sd = post.damping_prior
-        out.append((th[L.index["log_zeta"]] - math.log(med)) / sd)
-    for c in post.terms:
-        out += [(th[L.index[name]] - mean) / sd for name, mean, sd in c.own]
-    return np.array(out)
-
-
-def _hessian_scale(post: CrossingsLogPosterior, th: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Laplace sds of the parameters at the maximum (`curvature.curvature_sds` of -log p); the steps h
-    where the Hessian is not positive definite."""
-    sd = curvature_sds(lambda p: -post(p), th, h)
-    return h if sd is None else sd
 
 
 @dataclass
@@ -245,21 +101,6 @@ class CrossingsReference(Posterior):
         return idata
 
 
-def _choose_modes(cfg, data, post_of, th, sigma, start: int = 8, cap: int = 64):
-    """The smallest mode count whose predictions at th differ from twice as many by at most
-    TRUNCATION_FRACTION x sigma (a floor of 1e-9 of the data's RMS for clean data)."""
-    scale = float(np.sqrt(np.mean(np.asarray(data.value, float) ** 2)))
-    tol = max(TRUNCATION_FRACTION * sigma, 1e-9 * scale)
-    n = start
-    while True:
-        p1 = np.concatenate([r for r, _ in post_of(n).residuals(th[None])], axis=1)
-        p2 = np.concatenate([r for r, _ in post_of(2 * n).residuals(th[None])], axis=1)
-        err = float(np.max(np.abs(p1 - p2)))
-        if err <= tol or n >= cap:
-            return n, err
-        n *= 2
-
-
 @one_blas_thread
 def crossings_reference(
     data: Measurements,
@@ -290,24 +131,23 @@ def crossings_reference(
     )
     ei_prior = EIPrior.from_spec(cfg.prior)
     noise = NoisePrior.build("vague", np.asarray(data.value, float))
-    # the second mode's damping ratio (its resonant term): the damping prior's law about the damping
-    # the analysis is told or infers
-    mode_damping = (damping[0] if damping else cfg.beam.damping_ratio, cfg.prior.damping_log_sd)
+    # the second mode's damping ratio (its resonant term): its own, with the damping prior
+    mode_damping = (cfg.prior.damping_median, cfg.prior.damping_log_sd)
 
     def post_of(n_modes: int) -> CrossingsLogPosterior:
         return CrossingsLogPosterior(
-            _terms(cfg, data, n_modes, forces), ei_prior, noise,
+            peak.terms(cfg, data, n_modes, forces), ei_prior, noise,
             zeta_known=cfg.beam.damping_ratio, damping_prior=damping, forces=forces,
             mode_damping_prior=mode_damping,
         )  # fmt: skip
 
     post = post_of(8)
-    th = _start(post, cfg)
-    th, sigma = _least_squares(post, th)
-    n_modes, trunc = _choose_modes(cfg, data, post_of, th, sigma)
+    th = peak.start(post, cfg)
+    th, sigma = peak.least_squares_fit(post, th)
+    n_modes, trunc = peak.choose_modes(cfg, data, post_of, th, sigma)
     if n_modes != 8:
         post = post_of(n_modes)
-        th, sigma = _least_squares(post, th)
+        th, sigma = peak.least_squares_fit(post, th)
     rss = sum(float(np.sum(r**2)) for r, _ in post.residuals(th[None]))
     sigma = math.sqrt(rss / post.n)
     L = post.layout
@@ -318,7 +158,7 @@ def crossings_reference(
         if post.resonant:
             th[L.index["log_q1"]] = th[L.index["log_q2"]] = math.log(AMPLITUDE_MEDIAN)
             th[L.index["log_z2"]] = math.log(mode_damping[0])
-    h = np.array([_step(n, post) for n in L.names])
+    h = np.array([peak.step(n, post) for n in L.names])
     if laplace is None:
         kind = "linearised" if forces else ("laplace" if len(post.terms) > 1 else "emcee")
     else:
@@ -366,7 +206,7 @@ def crossings_reference(
             )  # fmt: skip
             if np.isfinite(res.fun) and res.fun < -float(post(th[None])[0]):
                 th = res.x
-        scale = _hessian_scale(post, th, h)
+        scale = peak.hessian_scale(post, th, h)
         s = dataclasses.replace(s, n_walkers=max(s.n_walkers, 2 * L.dim + 2))
         ch = sample(post, th, scale, s, seed, progress, desc="crossing MCMC")
         draws = ch.draws  # (chain, draw, D)
@@ -486,16 +326,3 @@ def _summarise(draws, truth) -> dict:
     out = summarise(draws, truth if truth != 0 else None)
     out["error"] = out["mean"] - float(truth)
     return out
-
-
-def _step(name: str, post: CrossingsLogPosterior) -> float:
-    """Finite-difference step of each parameter for the Laplace scale."""
-    if name.startswith("t0["):
-        return 1e-4
-    if name.startswith("log_v["):
-        return 1e-5
-    if name.startswith(("log_fb[", "log_zb[")):
-        return 1e-2
-    if name in RESONANT_NAMES:
-        return 1e-2
-    return {"log_EI": 1e-4, "log_zeta": 1e-2, "log_s": 1e-2, "log_l": 1e-2, "log_sigma": 1e-3}[name]

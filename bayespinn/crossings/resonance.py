@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: modes with a resonant term, and each one's band of basis frequencies about its frequency at the EI
+#: modes with a resonant term (0: none, the force law alone), and each one's band of basis frequencies about its frequency at the EI
 #: prior's median (the first wide: a heavy lorry's suspensions move the coupled mode by up to a quarter
 #: and damp it by up to 0.2; the second about its bare frequency)
 MODES = 2
@@ -40,6 +40,9 @@ BANDS = ((0.3, 2.0), (0.5, 1.5))
 AMPLITUDE_MEDIAN, AMPLITUDE_LOG_SD = 0.05, 1.5
 #: their parameters' names: each mode's log relative amplitude, the second mode's log damping ratio
 NAMES = ("log_q1", "log_q2", "log_z2")
+#: damping ratios below this are taken at it: as z -> 0 the weights' sds tend to a finite limit (a line
+#: spread over the basis frequencies about it), which this reaches to rounding; at 0 they would be 0 / 0
+MIN_DAMPING = 1e-6
 G = 9.81
 
 
@@ -106,7 +109,7 @@ class Resonance:
         dt = float(np.median(np.diff(times))) if times.size > 1 else 1.0
         window = max(float(times.max()) - entry_time, model.L / speed) + dt
         freqs = []
-        for n, (lo, hi) in zip(range(1, MODES + 1), BANDS, strict=True):
+        for n, (lo, hi) in zip(range(1, MODES + 1), BANDS[:MODES], strict=True):
             w = (n * math.pi / model.L) ** 2 * math.sqrt(EI_median / model.mu)
             a = math.pi * np.arange(1, int(hi * w * window / math.pi) + 2) / window
             freqs.append(a[(a > lo * w) & (a < min(hi * w, math.pi / dt))])
@@ -147,7 +150,9 @@ class Resonance:
             a = self.freqs[n - 1]
             if a.size == 0:
                 continue
-            H = normalised_spectrum(a, w, np.broadcast_to(np.asarray(z, float), EI.shape))
+            # an undamped mode: the normalised weights' limit as z -> 0 (finite), not 0 / 0
+            z = np.maximum(np.broadcast_to(np.asarray(z, float), EI.shape), MIN_DAMPING)
+            H = normalised_spectrum(a, w, z)
             wn = (n * n) * w1
             amp = (
                 np.asarray(q, float)[:, None]
