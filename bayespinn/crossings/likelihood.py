@@ -160,14 +160,17 @@ class CrossingsLogPosterior:
         zeta_known: float,
         damping_prior: tuple[float, float] | None,
         forces: bool,
-        mode_damping_prior: tuple[float, float] = (0.01, 1.0),
+        mode_damping_prior: tuple[float, float] | None = None,
     ):
-        """mode_damping_prior: (median, log-sd) of the second mode's damping ratio (its resonant term)."""
+        """mode_damping_prior: (median, log-sd) of the second mode's damping ratio (its resonant term);
+        None: the damping prior."""
         self.terms, self.ei_prior, self.noise_prior = terms, ei_prior, noise_prior
         self.zeta_known, self.damping_prior, self.forces = zeta_known, damping_prior, forces
-        self.mode_damping_prior = mode_damping_prior
         self.layout = Layout(terms, damping_prior is not None, forces)
         self.resonant = "log_q1" in self.layout.index
+        self.mode_damping_prior = mode_damping_prior or damping_prior
+        if self.resonant and self.mode_damping_prior is None:
+            raise ValueError("resonant terms need mode_damping_prior when the damping is known")
         self.n = int(sum(c.y.size for c in terms))
 
     def unpack(self, theta: np.ndarray) -> dict:

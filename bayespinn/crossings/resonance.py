@@ -46,6 +46,11 @@ MIN_DAMPING = 1e-6
 G = 9.81
 
 
+def bare_frequency(n: int, length: float, mass_per_length: float, EI):
+    """omega_n [rad/s] of the pinned uniform girder: (n pi / L)^2 sqrt(EI / mu), EI a float or array."""
+    return (n * math.pi / length) ** 2 * np.sqrt(np.asarray(EI, float) / mass_per_length)
+
+
 def coupled_mode(length, mass_per_length, loads, offsets, EI, zeta, fb, zb):
     """(omega [rad/s], damping ratio), arrays (W,), of the girder's first mode coupled to each axle's
     sprung body (mass P_j / g, bounce fb [Hz], damping ratio zb), the lorry centred on the span and frozen
@@ -56,7 +61,7 @@ def coupled_mode(length, mass_per_length, loads, offsets, EI, zeta, fb, zb):
     )
     L, mu = float(length), float(mass_per_length)
     W = EI.size
-    w1 = (math.pi / L) ** 2 * np.sqrt(EI / mu)
+    w1 = bare_frequency(1, L, mu, EI)
     m = np.asarray(loads, float).ravel() / G
     off = np.asarray(offsets, float).ravel()
     x = L / 2 + float(np.max(off)) / 2 - off
@@ -110,7 +115,7 @@ class Resonance:
         window = max(float(times.max()) - entry_time, model.L / speed) + dt
         freqs = []
         for n, (lo, hi) in zip(range(1, MODES + 1), BANDS[:MODES], strict=True):
-            w = (n * math.pi / model.L) ** 2 * math.sqrt(EI_median / model.mu)
+            w = float(bare_frequency(n, model.L, model.mu, EI_median))
             a = math.pi * np.arange(1, int(hi * w * window / math.pi) + 2) / window
             freqs.append(a[(a > lo * w) & (a < min(hi * w, math.pi / dt))])
         return cls(model.L, model.mu, model.loads, model.offsets, entry_time, window, tuple(freqs))
@@ -137,7 +142,7 @@ class Resonance:
         the second mode's damping z2 (arrays (W,)); body: (fb, zb) arrays when the analysis carries the
         lorry's sprung bodies (the first mode then coupled to them)."""
         EI = np.atleast_1d(np.asarray(EI, float))
-        w1 = (math.pi / self.length) ** 2 * np.sqrt(EI / self.mass_per_length)
+        w1 = bare_frequency(1, self.length, self.mass_per_length, EI)
         if body is None:
             wc, zc = w1, np.broadcast_to(np.asarray(zeta, float), EI.shape)
         else:
