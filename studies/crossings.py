@@ -211,6 +211,7 @@ def entry(m: dict, ei_true: float, runtime: float) -> dict:
         "entry_time",
         "damping_ratio",
         "axle_force_sd",
+        "axle_force_correlation",
         "body_frequency",
         "body_damping",
     ):
@@ -232,6 +233,8 @@ def fingerprint(args) -> str:
         "entry_time_sd": ENTRY_SD,
         # the fluctuating-force law's resonant modes (records made before they existed are not reused)
         "resonant_modes": RESONANT_MODES if args.forces == "fluctuating" else 0,
+        # the axles' fluctuations with a shared part (the same road): records made before are not reused
+        "shared_road": args.forces == "fluctuating",
     }
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
 

@@ -146,7 +146,8 @@ class Fit:
         def basis(h):
             s, ell, sig = np.exp(h[:3])
             dd = inertial_spectral_sd(alpha, np.array([s]), np.array([ell]))
-            B = (Rf * np.tile(dd, (1, J))[:, None, :])[0]
+            # the axles' own columns only: the laws compared here have independent axles
+            B = (Rf[:, :, : J * dd.shape[1]] * np.tile(dd, (1, J))[:, None, :])[0]
             if law != "today":
                 H = spectrum(w1 * math.exp(h[4]), math.exp(h[5])) if law == "free" else H2
                 B = np.concatenate([B, Rq * (math.exp(h[3]) * np.sqrt(H))[None]], 1)

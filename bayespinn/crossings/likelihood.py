@@ -13,6 +13,12 @@ acceleration, so it has no power at zero frequency (it does not change the mean 
 the stated axle loads and `load_rel_sd` describe) and a peak at w = 2 / l. With the forces fluctuating, the
 first two modes' resonant responses to force content beyond that basis (`resonance`) are integrated out
 the same way: their columns join the basis, their sds the spectral ones.
+
+The axles of one vehicle ride the same road, so their relative fluctuations are alike as functions of
+position on the span: with several axles each one's delta_j(tau) (tau its own time on the span, the basis'
+argument) is a common part, variance r s^2, plus its own, variance (1 - r) s^2, r the axles' correlation
+(`logit_r`, uniform prior on [0, 1]). The common part's columns are the sum of the axles' columns; they
+join the basis after the axles' own and before the resonant terms'.
 """
 
 from __future__ import annotations
@@ -78,6 +84,8 @@ class CrossingTerm:
     body_frequency: float = 2.5
     body_damping: float = 0.1
     resonance: Resonance | None = None
+    #: the axles' fluctuations share a common part (`logit_r`): with fluctuating forces and several axles
+    common: bool = False
 
     @property
     def own(self) -> list[tuple[str, float, float]]:
@@ -109,6 +117,12 @@ class CrossingTerm:
         mu, R = self.model.responses(*args, basis=True)
         if self.sprung:
             mu = mu + interaction_response(self.model, *args, p["fb"][i], p["zb"][i])
+        if (
+            self.common
+        ):  # the shared part's columns: the axles' columns summed, basis function by function
+            J, M = self.model.loads.size, self.model.n_basis
+            shared = R[:, :, : J * M].reshape(*R.shape[:2], J, M).sum(axis=2)
+            R = np.concatenate([R, shared], axis=2)
         if self.resonance is not None:
             t0 = np.broadcast_to(np.asarray(p["t0"][i], float), mu.shape[:1])
             R = np.concatenate([R, self.resonance.columns(self.model, t0)], axis=2)
@@ -116,9 +130,14 @@ class CrossingTerm:
 
     def column_sds(self, p: dict, i: int) -> np.ndarray:
         """The prior sds (W, M) of the weights on `responses`' columns: the force spectrum's at the basis
-        frequencies (the same for every axle), then the resonant terms'."""
+        frequencies (the same for every axle; with `common`, the axles' own parts times sqrt(1 - r) and
+        the shared part times sqrt(r)), then the resonant terms'."""
         alpha, _, _ = basis_frequencies(self.model.L / p["v"][i], self.model.n_basis)
-        d = np.tile(inertial_spectral_sd(alpha, p["s"], p["l"]), (1, self.model.loads.size))
+        f = inertial_spectral_sd(alpha, p["s"], p["l"])
+        d = np.tile(f, (1, self.model.loads.size))
+        if self.common:
+            r = np.asarray(p["r"], float)[:, None]
+            d = np.concatenate([d * np.sqrt(1.0 - r), f * np.sqrt(r)], axis=1)
         if self.resonance is None:
             return d
         body = (p["fb"][i], p["zb"][i]) if self.sprung else None
@@ -135,6 +154,8 @@ class Layout:
             names.append("log_zeta")
         if forces:
             names += ["log_s", "log_l", "log_sigma"]
+            if any(c.common for c in terms):
+                names.append("logit_r")
             if any(c.resonance is not None for c in terms):
                 names += list(RESONANT_NAMES)
         for c in terms:
@@ -196,6 +217,7 @@ class CrossingsLogPosterior:
             out["s"] = np.exp(th[:, L.index["log_s"]])
             out["l"] = np.exp(th[:, L.index["log_l"]])
             out["sigma"] = np.exp(th[:, L.index["log_sigma"]])
+            out["r"] = 1.0 / (1.0 + np.exp(-L.col(th, "logit_r", -np.inf)))
         if self.resonant:
             for k in ("q1", "q2", "z2"):
                 out[k] = np.exp(th[:, L.index[f"log_{k}"]])
@@ -220,6 +242,9 @@ class CrossingsLogPosterior:
                 -np.inf,
             )
             lp = lp + self.noise_prior.logpdf(th[:, L.index["log_sigma"]])
+            if "logit_r" in L.index:  # r uniform on [0, 1]: the logistic density on logit r
+                u = th[:, L.index["logit_r"]]
+                lp = lp - np.abs(u) - 2.0 * np.log1p(np.exp(-np.abs(u)))
         if self.resonant:
             for k in ("log_q1", "log_q2"):
                 lp = lp + _normal(th[:, L.index[k]], math.log(AMPLITUDE_MEDIAN), AMPLITUDE_LOG_SD)

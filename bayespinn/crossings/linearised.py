@@ -45,8 +45,10 @@ HYPER = ("log_s", "log_l", "log_sigma")
 
 
 def hyper_names(post: CrossingsLogPosterior) -> tuple[str, ...]:
-    """The hyperparameters emcee samples: the force law's and the noise sd, then the resonant terms'."""
-    return HYPER + (RESONANT_NAMES if post.resonant else ())
+    """The hyperparameters emcee samples: the force law's and the noise sd, the axles' correlation (several
+    axles), then the resonant terms'."""
+    common = ("logit_r",) if "logit_r" in post.layout.index else ()
+    return HYPER + common + (RESONANT_NAMES if post.resonant else ())
 
 
 #: re-linearise until theta* moves by less than this fraction of its conditional sd (at most MAX_ROUNDS)

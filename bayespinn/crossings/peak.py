@@ -60,6 +60,7 @@ def terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[C
                 body_frequency=veh.body_frequency,
                 body_damping=veh.body_damping,
                 resonance=res,
+                common=forces and veh.loads.size > 1,
             )  # fmt: skip
         )
     return out
@@ -94,7 +95,7 @@ def _rss_profile(post: CrossingsLogPosterior, theta: np.ndarray) -> np.ndarray:
 def least_squares_fit(post: CrossingsLogPosterior, th0: np.ndarray) -> tuple[np.ndarray, float]:
     """The constant-force parameters' maximum (Gauss-Newton on residuals / sigma and the priors as
     pseudo-residuals, sigma from the fit), and sigma there."""
-    hyper = ("log_s", "log_l", "log_sigma", *RESONANT_NAMES)
+    hyper = ("log_s", "log_l", "log_sigma", "logit_r", *RESONANT_NAMES)
     idx = [i for i, n in enumerate(post.layout.names) if n not in hyper]
     base = th0.copy()
 
@@ -191,6 +192,6 @@ def step(name: str, post: CrossingsLogPosterior) -> float:
         return 1e-5
     if name.startswith(("log_fb[", "log_zb[")):
         return 1e-2
-    if name in RESONANT_NAMES:
+    if name in RESONANT_NAMES or name == "logit_r":
         return 1e-2
     return {"log_EI": 1e-4, "log_zeta": 1e-2, "log_s": 1e-2, "log_l": 1e-2, "log_sigma": 1e-3}[name]

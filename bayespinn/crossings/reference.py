@@ -51,7 +51,8 @@ IMPORTANCE_CHAINS = 4
 @dataclass
 class CrossingsReference(Posterior):
     """The crossing reference's `Posterior`: EI and sigma draws, and the nuisances' draws (`nuisance`:
-    damping_ratio, axle_force_sd, axle_force_time_scale (chain, draw); per crossing speed and entry_time)."""
+    damping_ratio, axle_force_sd, axle_force_time_scale, axle_force_correlation (chain, draw); per crossing
+    speed and entry_time)."""
 
     nuisance: dict = field(default_factory=dict, repr=False, compare=False)
     crossing_names: tuple = ()
@@ -60,7 +61,12 @@ class CrossingsReference(Posterior):
         out = super().summary(truth)
         t = truth or {}
         nz = self.nuisance
-        for key in ("damping_ratio", "axle_force_sd", "axle_force_time_scale"):
+        for key in (
+            "damping_ratio",
+            "axle_force_sd",
+            "axle_force_time_scale",
+            "axle_force_correlation",
+        ):
             if key in nz:
                 out[key] = _summarise(nz[key], t.get(key))
         per = nz.get("crossings", {})
@@ -155,6 +161,8 @@ def crossings_reference(
         th[L.index["log_s"]] = math.log(0.5 * 0.05)
         th[L.index["log_l"]] = math.log(FORCE_L_MEDIAN)
         th[L.index["log_sigma"]] = math.log(sigma)
+        if "logit_r" in L.index:
+            th[L.index["logit_r"]] = 0.0  # the axles' correlation at its prior median, 1/2
         if post.resonant:
             th[L.index["log_q1"]] = th[L.index["log_q2"]] = math.log(AMPLITUDE_MEDIAN)
             th[L.index["log_z2"]] = math.log(mode_damping[0])
@@ -253,6 +261,8 @@ def crossings_reference(
     if forces:
         nuisance["axle_force_sd"] = par["s"].reshape(shape)
         nuisance["axle_force_time_scale"] = par["l"].reshape(shape)
+        if "logit_r" in L.index:
+            nuisance["axle_force_correlation"] = par["r"].reshape(shape)
     for i, c in enumerate(post.terms):
         e = {}
         if c.speed_sd > 0:

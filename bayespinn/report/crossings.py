@@ -14,6 +14,7 @@ NUISANCES = (
     ("damping_ratio", "girder damping ratio", "-"),
     ("axle_force_sd", "axle-force fluctuation (share of the load)", "-"),
     ("axle_force_time_scale", "its time scale", "s"),
+    ("axle_force_correlation", "its correlation between axles", "-"),
     ("body_frequency", "suspension bounce frequency", "Hz"),
     ("body_damping", "suspension damping ratio", "-"),
 )
