@@ -131,9 +131,11 @@ def test_fluctuating_forces_hold_the_truth_where_constant_forces_miss():
     s = ref.summary({"EI": cfg.beam.EI})
     assert abs(_z(s["EI"], cfg.beam.EI)) < Z_BAND
     assert 0.01 < s["axle_force_sd"]["mean"] < 0.2
-    # the linearisation passes its importance check here, and so the analysis is converged
-    assert ref.diagnostics["linearisation"]["importance_check"]["passed"]
-    assert ref.diagnostics["converged"] and not ref.diagnostics["problems"]
+    # converged, by the linearisation or (with the resonant terms, whose amplitudes scale with 1 / EI, its
+    # importance check fails here) by the importance-sampled exact posterior
+    d = ref.diagnostics
+    assert d["converged"] and not d["problems"]
+    assert d["linearisation"]["importance_check"]["passed"] or d["importance"]["passed"]
     # negative control: constant forces on the same data (today's modal reference)
     res = bp.analyse(
         data, cfg, methods=("modal",), seed=0, profile="smoke", truth={"EI": cfg.beam.EI}
