@@ -125,7 +125,9 @@ def main(argv=None) -> int:
     h = np.array([peak.step(n, post) for n in names])
     sd = peak.hessian_scale(post, best, h)
     print(f"girder {a.girder} crossing {a.crossing}, {a.law} axles, road n_max {a.road_nmax}")
-    print(f"log posterior at the peak {lp:.2f}; with speed, entry time and EI at the truth {lp_truth:.2f}")
+    print(
+        f"log posterior at the peak {lp:.2f}; with speed, entry time and EI at the truth {lp_truth:.2f}"
+    )
     for i, n in enumerate(names):
         z = (best[i] - truth[n]) / sd[i] if n in truth else float("nan")
         print(f"  {n:20s} {best[i]:12.6f}  sd {sd[i]:.2e}  z {z:+.2f}")

@@ -134,7 +134,9 @@ def run_groups(
                 for sm in samplers
             ]
         )
-        tau_dim = per.max(axis=0)
+        # a chain that has not moved has no autocorrelation time (emcee gives NaN): it counts as
+        # correlated over the whole run, so the run goes on to max_steps and its diagnostics say so
+        tau_dim = np.where(np.isfinite(per), per, float(steps)).max(axis=0)
         done, need = enough(steps, tau_dim)
         if done or steps >= max_steps:
             break
@@ -194,7 +196,8 @@ def sample(
         enough=enough, progress=progress, desc=desc,
     )  # fmt: skip
     tau = float(tau_dim.max())
-    burn = int(math.ceil(max(s.burn_factor * tau, steps / 5)))
+    # at most half the run: a run stopped at max_steps short of its burn-in still keeps draws to judge
+    burn = min(int(math.ceil(max(s.burn_factor * tau, steps / 5))), steps // 2)
     thin = max(1, int(tau / 4))
     draws, lp, per_walker, acc = collect(samplers, burn, thin)
     return Chains(draws, tau, steps, acc, lp, per_walker)
