@@ -29,8 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import crossings as S  # noqa: E402
 
 from bayespinn.crossings import peak  # noqa: E402
-from bayespinn.crossings.likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior  # noqa: E402
-from bayespinn.crossings.resonance import AMPLITUDE_MEDIAN  # noqa: E402
+from bayespinn.crossings.likelihood import CrossingsLogPosterior  # noqa: E402
 from bayespinn.uq.priors import EIPrior, NoisePrior  # noqa: E402
 
 
@@ -68,13 +67,7 @@ def posterior(gcfg, d, data, law: str) -> tuple[CrossingsLogPosterior, np.ndarra
     if n != 8:
         post = post_of(n)
         th, sigma = peak.least_squares_fit(post, th)
-    idx = post.layout.index
-    th[idx["log_s"]], th[idx["log_l"]] = math.log(0.025), math.log(FORCE_L_MEDIAN)
-    th[idx["log_sigma"]] = math.log(sigma)
-    th[idx["log_q1"]] = th[idx["log_q2"]] = math.log(AMPLITUDE_MEDIAN)
-    th[idx["log_z2"]] = math.log(damping[0])
-    if "logit_r" in idx:
-        th[idx["logit_r"]] = 0.0
+    th = peak.fluctuation_start(post, th, sigma)
     return post, th
 
 

@@ -20,9 +20,9 @@ from . import resonance
 from .checks import split_crossings
 from .curvature import curvature_sds
 from .forward import CrossingModel
-from .likelihood import CrossingsLogPosterior, CrossingTerm, n_basis_for
+from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_basis_for
+from .resonance import AMPLITUDE_MEDIAN, Resonance
 from .resonance import NAMES as RESONANT_NAMES
-from .resonance import Resonance
 
 #: modes in the dynamic correction of the force-basis responses: the fluctuation's spectrum lies below
 #: 4 / FORCE_L_MIN = 33 rad/s, under the first mode (63 rad/s for the Exeter girder) and far under the
@@ -160,6 +160,23 @@ def _prior_residuals(post: CrossingsLogPosterior, th: np.ndarray) -> np.ndarray:
     for c in post.terms:
         out += [(th[L.index[name]] - mean) / sd for name, mean, sd in c.own]
     return np.array(out)
+
+
+def fluctuation_start(post: CrossingsLogPosterior, th: np.ndarray, sigma: float) -> np.ndarray:
+    """th with the fluctuating-force law's parameters at their start: the force scale and time scale, the
+    axles' correlation and the resonant terms at their priors' medians (half the scale's), sigma from
+    the constant-force fit."""
+    th = th.copy()
+    idx = post.layout.index
+    th[idx["log_s"]] = math.log(0.5 * 0.05)
+    th[idx["log_l"]] = math.log(FORCE_L_MEDIAN)
+    th[idx["log_sigma"]] = math.log(sigma)
+    if "logit_r" in idx:
+        th[idx["logit_r"]] = 0.0  # the axles' correlation at its prior median, 1/2
+    if post.resonant:
+        th[idx["log_q1"]] = th[idx["log_q2"]] = math.log(AMPLITUDE_MEDIAN)
+        th[idx["log_z2"]] = math.log(post.mode_damping_prior[0])
+    return th
 
 
 def hessian_scale(post: CrossingsLogPosterior, th: np.ndarray, h: np.ndarray) -> np.ndarray:

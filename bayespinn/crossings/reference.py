@@ -41,8 +41,7 @@ from .checks import (  # noqa: F401  (re-exported: the package's names)
     refuse_crossings,
     split_crossings,
 )
-from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior
-from .resonance import AMPLITUDE_MEDIAN
+from .likelihood import CrossingsLogPosterior
 
 #: chains the importance sampler's resampled draws are split into (a layout, not independent chains)
 IMPORTANCE_CHAINS = 4
@@ -157,15 +156,8 @@ def crossings_reference(
     rss = sum(float(np.sum(r**2)) for r, _ in post.residuals(th[None]))
     sigma = math.sqrt(rss / post.n)
     L = post.layout
-    if forces:  # the fluctuation's parameters start from the priors' medians
-        th[L.index["log_s"]] = math.log(0.5 * 0.05)
-        th[L.index["log_l"]] = math.log(FORCE_L_MEDIAN)
-        th[L.index["log_sigma"]] = math.log(sigma)
-        if "logit_r" in L.index:
-            th[L.index["logit_r"]] = 0.0  # the axles' correlation at its prior median, 1/2
-        if post.resonant:
-            th[L.index["log_q1"]] = th[L.index["log_q2"]] = math.log(AMPLITUDE_MEDIAN)
-            th[L.index["log_z2"]] = math.log(mode_damping[0])
+    if forces:
+        th = peak.fluctuation_start(post, th, sigma)
     h = np.array([peak.step(n, post) for n in L.names])
     if laplace is None:
         kind = "linearised" if forces else ("laplace" if len(post.terms) > 1 else "emcee")
