@@ -158,6 +158,8 @@ class Layout:
                 names.append("logit_r")
             if any(c.resonance is not None for c in terms):
                 names += list(RESONANT_NAMES)
+        #: the hyperparameters: the force law's, the noise sd, the axles' correlation, the resonant terms'
+        self.hyper = tuple(names[1 + int(damping) :])
         for c in terms:
             names += [n for n, _, _ in c.own]
         self.names = names

@@ -39,17 +39,6 @@ from .likelihood import (
     rows_of,
     woodbury_loglik,
 )
-from .resonance import NAMES as RESONANT_NAMES
-
-HYPER = ("log_s", "log_l", "log_sigma")
-
-
-def hyper_names(post: CrossingsLogPosterior) -> tuple[str, ...]:
-    """The hyperparameters emcee samples: the force law's and the noise sd, the axles' correlation (several
-    axles), then the resonant terms'."""
-    common = ("logit_r",) if "logit_r" in post.layout.index else ()
-    return HYPER + common + (RESONANT_NAMES if post.resonant else ())
-
 
 #: re-linearise until theta* moves by less than this fraction of its conditional sd (at most MAX_ROUNDS)
 MOVE_TOL, MAX_ROUNDS = 0.05, 6
@@ -120,7 +109,7 @@ class Linearisation:
         L = post.layout
         self.theta = np.asarray(theta, float).copy()
         self.tabulate = tabulate
-        self.hyper = [L.index[n] for n in hyper_names(post)]
+        self.hyper = [L.index[n] for n in L.hyper]
         if (
             tabulate
         ):  # a sprung crossing's suspension is sampled with the hyperparameters, tabulated
@@ -405,7 +394,7 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
     from ..uq.sampler import sample
 
     theta = np.asarray(theta0, float).copy()
-    hyp = [post.layout.index[n] for n in hyper_names(post)]
+    hyp = [post.layout.index[n] for n in post.layout.hyper]
     h = theta[hyp]
     moves = []
     for _ in range(MAX_ROUNDS):

@@ -95,8 +95,7 @@ def _rss_profile(post: CrossingsLogPosterior, theta: np.ndarray) -> np.ndarray:
 def least_squares_fit(post: CrossingsLogPosterior, th0: np.ndarray) -> tuple[np.ndarray, float]:
     """The constant-force parameters' maximum (Gauss-Newton on residuals / sigma and the priors as
     pseudo-residuals, sigma from the fit), and sigma there."""
-    hyper = ("log_s", "log_l", "log_sigma", "logit_r", *RESONANT_NAMES)
-    idx = [i for i, n in enumerate(post.layout.names) if n not in hyper]
+    idx = [i for i, n in enumerate(post.layout.names) if n not in post.layout.hyper]
     base = th0.copy()
 
     def full(z: np.ndarray) -> np.ndarray:
