@@ -156,6 +156,20 @@ def _study_jobs() -> list[Job]:
                 (study,),
             )
         )  # fmt: skip
+    for page in sorted((ROOT / PAPER / "fitcheck").glob("calibration-*.json")):
+        doc = _load(f"{PAPER}/fitcheck/{page.name}")
+        study = f"{PAPER}/fitcheck/{page.name}"
+        config = ("--config", doc["config"]) if doc.get("config") else ()
+        out.append(
+            Job(
+                page.stem,
+                (PY, "studies/fitcheck_calibration.py", "--methods", doc["method"], *config,
+                 "--case", doc["case"], "--snr", f"{doc['snr_db']:g}", "--replicates", "200",
+                 "--out", f"{PAPER}/fitcheck", "--quiet"),
+                study,
+                (study,),
+            )
+        )  # fmt: skip
     crossings = [f"{PAPER}/crossings/g{g}-c{k}.json" for g in range(3) for k in range(10)]
     out.append(
         Job(
@@ -234,6 +248,12 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
                 n - resumed
             ), "its last session's rate over every replicate"
         return float(doc["runtime_s"]), "its run time"
+    if doc.get("schema", "").startswith("bayespinn.studies.fitcheck-calibration/") and doc["records"]:
+        times = [float(r.get("time_s") or 0.0) for r in doc["records"]]
+        asked = _asked(job.command)
+        if len(times) < asked:  # a partial study: its rate over the replicates the job asks for
+            return sum(times) * asked / len(times), "its replicates' mean time, times those asked for"
+        return sum(times), "the sum of its replicates' times"
     if isinstance(doc.get("records"), list) and doc["records"]:
         recs = doc["records"]
         folder = (
@@ -259,6 +279,14 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
             float(r.get("runtime_s") or 0.0) for r in doc["rows"]
         ), "the sum of its rows' times"
     return None, "not recorded (it reuses other runs' posteriors)"
+
+
+def _asked(command: tuple[str, ...]) -> int:
+    """The replicate count a job's command asks for (`--replicates N`), 0 when it names none."""
+    for a, b in zip(command, command[1:], strict=False):
+        if a == "--replicates":
+            return int(b)
+    return 0
 
 
 def _hms(s: float | None) -> str:

@@ -324,13 +324,32 @@ def _fitcheck() -> Section:
                 "d",
             ),
         ]
+    for rec in _calibrations():
+        name = Path(rec).stem
+        out += [
+            Entry(f"{name}: well-specified datasets", rec, "summary.replicates", "d"),
+            Entry(f"{name}: false alarms", rec, "summary.false_alarms", "d"),
+            Entry(f"{name}: binomial region, lower", rec, "summary.region[0]", "d"),
+            Entry(f"{name}: binomial region, upper", rec, "summary.region[1]", "d"),
+            Entry(f"{name}: inside the region", rec, "summary.inside", ""),
+        ]
     return Section(
         "The fit check",
         "The modal reference's fit check over independent datasets: 'fits' expected on data the model "
         "describes, 'misfit' on data it does not (stiff bearings analysed as pinned, a damaged segment "
-        "analysed as uniform, AR(1) noise analysed as white). Page: `reports/paper/fitcheck.md`.",
+        "analysed as uniform, AR(1) noise analysed as white). Then its false alarms per method, case and "
+        "SNR on datasets the model describes (`studies/fitcheck_calibration.py`), against the two-sided "
+        "binomial region of the stated rate at the record's false-failure rate; a record with fewer "
+        "datasets than asked for is a partial run. Pages: `reports/paper/fitcheck.md`, "
+        "`reports/paper/fitcheck/calibration.md`.",
         tuple(out),
     )
+
+
+def _calibrations() -> list[str]:
+    """The fit check's false-alarm records (`studies/fitcheck_calibration.py`), sorted by name."""
+    folder = ROOT / "reports" / "paper" / "fitcheck"
+    return [str(p.relative_to(ROOT)) for p in sorted(folder.glob("calibration-*.json"))]
 
 
 CROSSINGS = "reports/paper/crossings/study.json"
