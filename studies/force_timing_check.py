@@ -10,6 +10,11 @@ wrong timing under each force law.
 
     python studies/force_timing_check.py --girder 1 --crossing 3 --law independent
     python studies/force_timing_check.py --girder 1 --crossing 3 --law shared --road-nmax 0.3
+    python studies/force_timing_check.py --girder 1 --crossing 3 --law shared --band
+    python studies/force_timing_check.py --girder 1 --crossing 3 --law shared --band --band-range 0.5,2.5
+
+`--band` adds the force spectrum's band near the first mode (`bayespinn.crossings.tail`), which the
+reference does not carry; `--band-range` sets that band in units of the first mode's frequency.
 
 A diagnostic, not a study with records: it prints its table (one core, a few minutes).
 """
@@ -46,12 +51,14 @@ def crossing_data(g: int, k: int, road_nmax: float | None):
     return gcfg, d, data
 
 
-def posterior(gcfg, d, data, law: str) -> tuple[CrossingsLogPosterior, np.ndarray]:
+def posterior(
+    gcfg, d, data, law: str, band: bool = False
+) -> tuple[CrossingsLogPosterior, np.ndarray]:
     cfg = S.stated_config(gcfg, d, True, "fluctuating", "sprung")
     damping = (cfg.prior.damping_median, cfg.prior.damping_log_sd)
 
     def post_of(n):
-        terms = peak.terms(cfg, data, n, True)
+        terms = peak.terms(cfg, data, n, True, band=band)
         for c in terms:
             c.common = law == "shared"
         return CrossingsLogPosterior(
@@ -69,6 +76,12 @@ def posterior(gcfg, d, data, law: str) -> tuple[CrossingsLogPosterior, np.ndarra
         th, sigma = peak.least_squares_fit(post, th)
     th = peak.fluctuation_start(post, th, sigma)
     return post, th
+
+
+def tail_range() -> tuple[float, float]:
+    from bayespinn.crossings import tail
+
+    return tail.BAND
 
 
 def maximise(f, th, free=None):
@@ -92,9 +105,18 @@ def main(argv=None) -> int:
     p.add_argument("--crossing", type=int, default=3)
     p.add_argument("--law", choices=("independent", "shared"), default="shared")
     p.add_argument("--road-nmax", type=float, default=None, help="cycles/m; default the ISO band's")
+    p.add_argument(
+        "--band", action="store_true", help="the force spectrum's band near the first mode"
+    )
+    p.add_argument("--band-range", default=None, help="lo,hi in first-mode frequencies (0.5,1.6)")
     a = p.parse_args(argv)
+    if a.band_range is not None:
+        from bayespinn.crossings import tail
+
+        lo, hi = (float(v) for v in a.band_range.split(","))
+        tail.BAND = (lo, hi)
     gcfg, d, data = crossing_data(a.girder, a.crossing, a.road_nmax)
-    post, th = posterior(gcfg, d, data, a.law)
+    post, th = posterior(gcfg, d, data, a.law, a.band)
     names = post.layout.names
 
     def f(z):
@@ -117,7 +139,8 @@ def main(argv=None) -> int:
     best, lp = (peak1, lp1) if lp1 >= lp2 else (peak2, lp2)
     h = np.array([peak.step(n, post) for n in names])
     sd = peak.hessian_scale(post, best, h)
-    print(f"girder {a.girder} crossing {a.crossing}, {a.law} axles, road n_max {a.road_nmax}")
+    band = f", band {tail_range()}" if a.band else ""
+    print(f"girder {a.girder} crossing {a.crossing}, {a.law} axles, road n_max {a.road_nmax}{band}")
     print(
         f"log posterior at the peak {lp:.2f}; with speed, entry time and EI at the truth {lp_truth:.2f}"
     )

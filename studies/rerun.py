@@ -248,11 +248,13 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
                 n - resumed
             ), "its last session's rate over every replicate"
         return float(doc["runtime_s"]), "its run time"
-    if doc.get("schema", "").startswith("bayespinn.studies.fitcheck-calibration/") and doc["records"]:
+    calibration = doc.get("schema", "").startswith("bayespinn.studies.fitcheck-calibration/")
+    if calibration and doc["records"]:
         times = [float(r.get("time_s") or 0.0) for r in doc["records"]]
         asked = _asked(job.command)
         if len(times) < asked:  # a partial study: its rate over the replicates the job asks for
-            return sum(times) * asked / len(times), "its replicates' mean time, times those asked for"
+            rate = sum(times) / len(times)
+            return rate * asked, "its replicates' mean time, times those asked for"
         return sum(times), "the sum of its replicates' times"
     if isinstance(doc.get("records"), list) and doc["records"]:
         recs = doc["records"]

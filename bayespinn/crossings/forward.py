@@ -31,21 +31,27 @@ from ..physics.modal import static_unit_deflection, static_unit_moment
 BOUNDARY_FACTOR = 1.5
 
 
-def basis_frequencies(Te: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def basis_frequencies(
+    Te: np.ndarray, m: int, start: int = 1
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(alpha (W, m), beta (W, m), half-width Lh (W,)) of the Hilbert-space basis (Solin and Sarkka)
-    phi_m(tau) = Lh^(-1/2) sin(alpha_m tau + beta_m) on an axle's time on the span tau in [0, Te]: the
-    Laplacian's eigenfunctions on [-Lh, Lh] around the interval's centre, Lh = BOUNDARY_FACTOR Te / 2;
-    sqrt of the eigenvalue alpha_m = pi m / (2 Lh)."""
+    phi_k(tau) = Lh^(-1/2) sin(alpha_k tau + beta_k), k = start .. start + m - 1, on an axle's time on the
+    span tau in [0, Te]: the Laplacian's eigenfunctions on [-Lh, Lh] around the interval's centre,
+    Lh = BOUNDARY_FACTOR Te / 2; sqrt of the eigenvalue alpha_k = pi k / (2 Lh)."""
     Te = np.atleast_1d(np.asarray(Te, float))
     Lh = BOUNDARY_FACTOR * Te / 2.0
-    alpha = np.pi * np.arange(1, m + 1)[None, :] / (2.0 * Lh[:, None])
+    alpha = np.pi * np.arange(start, start + m)[None, :] / (2.0 * Lh[:, None])
     beta = alpha * (Lh[:, None] - Te[:, None] / 2.0)
     return alpha, beta, Lh
 
 
-def basis_functions(tau: np.ndarray, Te: np.ndarray, m: int) -> np.ndarray:
-    """phi_m(tau) for tau (W, P) on [0, Te (W,)]: array (W, m, P)."""
-    alpha, beta, Lh = basis_frequencies(Te, m)
+def basis_functions(tau: np.ndarray, Te: np.ndarray, m: int, start: int = 1) -> np.ndarray:
+    """phi_k(tau), k = start .. start + m - 1, for tau (W, P) on [0, Te (W,)]: array (W, m, P)."""
+    alpha, beta, Lh = basis_frequencies(Te, m, start)
+    return _basis(tau, alpha, beta, Lh)
+
+
+def _basis(tau: np.ndarray, alpha: np.ndarray, beta: np.ndarray, Lh: np.ndarray) -> np.ndarray:
     return (
         np.sin(alpha[:, :, None] * tau[:, None, :] + beta[:, :, None]) / np.sqrt(Lh)[:, None, None]
     )
@@ -70,6 +76,8 @@ class CrossingModel:
     n_modes : modes in the dynamic correction of the constant forces
     n_basis : force basis functions per axle (0: constant forces only)
     basis_modes : modes in the dynamic correction of the basis forces (default n_modes)
+    band : (first index, count) of further basis functions per axle, beyond the first n_basis (a band of
+        the force's spectrum, `tail`); their columns follow every axle's first n_basis, axle by axle
     """
 
     def __init__(
@@ -86,6 +94,7 @@ class CrossingModel:
         n_modes: int = 10,
         n_basis: int = 0,
         basis_modes: int | None = None,
+        band: tuple[int, int] | None = None,
     ):
         self.L, self.mu = float(length), float(mass_per_length)
         self.loads = np.asarray(loads, float).ravel()
@@ -99,6 +108,11 @@ class CrossingModel:
         self.any_u, self.any_xx = bool(np.any(self.a_u != 0)), bool(np.any(self.a_xx != 0))
         self.n_modes, self.n_basis = int(n_modes), int(n_basis)
         self.basis_modes = min(self.n_modes, int(n_modes if basis_modes is None else basis_modes))
+        self.band = None if band is None or int(band[1]) == 0 else (int(band[0]), int(band[1]))
+        if self.band is not None and (self.n_basis == 0 or self.band[0] <= self.n_basis):
+            raise ValueError(
+                f"a band {self.band} must start beyond the {self.n_basis} basis functions"
+            )
         self.k = np.arange(1, self.n_modes + 1) * math.pi / self.L  # (N,)
         # distinct sensors (x, a_u, a_xx) and distinct times: modal coordinates once per time
         keys = np.stack([x, self.a_u, self.a_xx], axis=1)
@@ -120,9 +134,14 @@ class CrossingModel:
         )
 
     @property
+    def n_band(self) -> int:
+        """Band functions per axle (`band`)."""
+        return 0 if self.band is None else self.band[1]
+
+    @property
     def n_columns(self) -> int:
-        """Columns of the basis responses: n_basis per axle."""
-        return self.n_basis * self.loads.size
+        """Columns of the basis responses: n_basis per axle, then n_band per axle."""
+        return (self.n_basis + self.n_band) * self.loads.size
 
     def _powers(self, z1: np.ndarray, N: int, square: bool) -> np.ndarray:
         """z1^n (or z1^(n^2) with square) for n = 1..N, z1 (W, U) -> (W, N, U): one or two complex
@@ -191,12 +210,12 @@ class CrossingModel:
 
     def responses(self, EI, zeta, v, t0, *, basis: bool = False):
         """The constant-force response (W, P) and, with basis=True, the responses to each axle's force basis
-        functions P_j phi_m(tau_j) (W, P, J m; column j m + i), for parameter sets EI [N m^2], zeta [-],
-        v [m/s], t0 [s] (arrays (W,) or floats)."""
+        functions P_j phi_m(tau_j) (W, P, J (m + b); column j m + i, then the band's J m + j b + i), for
+        parameter sets EI [N m^2], zeta [-], v [m/s], t0 [s] (arrays (W,) or floats)."""
         EI, zeta, v, t0 = (np.atleast_1d(np.asarray(a, float)) for a in (EI, zeta, v, t0))
         EI, zeta, v, t0 = np.broadcast_arrays(EI, zeta, v, t0)
-        W, N, M = EI.size, self.n_modes, self.n_basis
-        Nb = self.basis_modes
+        W, N, M, B = EI.size, self.n_modes, self.n_basis, self.n_band
+        Nb, J = self.basis_modes, self.loads.size
         omega = self.k[None, :] ** 2 * np.sqrt(EI[:, None] / self.mu)  # (W, N)
         wd = omega * np.sqrt(1.0 - zeta[:, None] ** 2)
         lam = -zeta[:, None] * omega + 1j * wd
@@ -206,6 +225,9 @@ class CrossingModel:
         R = np.zeros((W, self.x.size, self.n_columns)) if basis and M else None
         if R is not None:
             alpha, beta, Lh = basis_frequencies(Te, M)
+            if B:  # the band's functions after the first M, one basis of M + B per axle
+                ab, bb, _ = basis_frequencies(Te, B, self.band[0])
+                alpha, beta = np.concatenate([alpha, ab], 1), np.concatenate([beta, bb], 1)
         for j, (Pj, oj) in enumerate(zip(self.loads, self.offsets, strict=True)):
             F = 2.0 * Pj / (self.mu * self.L)
             tau = self.times[None, :] - t0[:, None] - oj / v[:, None]  # (W, U)
@@ -243,10 +265,12 @@ class CrossingModel:
             A1 = F * s * np.exp(-1j * beta)[:, :, None] * ones
             A2 = -F * s * np.exp(1j * beta)[:, :, None] * ones
             # the basis at each distinct time, then at the observations (their times' columns)
-            phi = basis_functions(tau_in, Te, M)[:, :, self.time_of]
+            phi = _basis(tau_in, alpha, beta, Lh)[:, :, self.time_of]
             basis_st = st[:, None, :] * phi
+            low, high = slice(j * M, (j + 1) * M), slice(J * M + j * B, J * M + (j + 1) * B)
             if Nb == 0:  # the quasi-static response alone
-                R[:, :, j * M : (j + 1) * M] = np.transpose(basis_st, (0, 2, 1))
+                R[:, :, low] = np.transpose(basis_st[:, :M], (0, 2, 1))
+                R[:, :, high] = np.transpose(basis_st[:, M:], (0, 2, 1))
                 continue
             e_a = np.exp(-1j * alpha[:, :, None] * tau_in[:, None, :])  # (W, M, U)
             rest = (lam[:, :Nb], omega[:, :Nb], wd[:, :Nb], zeta, Te, e_lam[:, :Nb], e_af[:, :Nb])
@@ -258,7 +282,8 @@ class CrossingModel:
             )
             Rj = self._gather(E1 + E2)  # (W, M, P)
             Rj += basis_st
-            R[:, :, j * M : (j + 1) * M] = np.transpose(Rj, (0, 2, 1))
+            R[:, :, low] = np.transpose(Rj[:, :M], (0, 2, 1))
+            R[:, :, high] = np.transpose(Rj[:, M:], (0, 2, 1))
         return (mean, R) if basis else mean
 
     def predict(self, EI, zeta, v, t0) -> np.ndarray:

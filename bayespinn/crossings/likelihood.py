@@ -19,6 +19,11 @@ position on the span: with several axles each one's delta_j(tau) (tau its own ti
 argument) is a common part, variance r s^2, plus its own, variance (1 - r) s^2, r the axles' correlation
 (`logit_r`, uniform prior on [0, 1]). The common part's columns are the sum of the axles' columns; they
 join the basis after the axles' own and before the resonant terms'.
+
+A crossing's model may carry a band of further basis functions near the girder's first mode (`tail`: the
+force's spectrum that a suspension passes from the road's short wavelengths), shared by the axles, their
+sds the road's law times a level inferred on a log-normal prior (`log_tail`); their columns follow the
+common part's.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from .forward import CrossingModel, basis_frequencies
 from .interaction import interaction_response
 from .resonance import AMPLITUDE_LOG_SD, AMPLITUDE_MEDIAN, Resonance
 from .resonance import NAMES as RESONANT_NAMES
+from .tail import TAIL_LOG_SD, relative_force_sd
 
 #: the force time scale's prior: log-normal, median FORCE_L_MEDIAN [s], log-sd FORCE_L_LOG_SD, truncated
 #: below at FORCE_L_MIN (the spectral peak 2 / l at most 2.7 Hz there, above a lorry body's bounce)
@@ -112,7 +118,8 @@ class CrossingTerm:
         return mu
 
     def responses(self, p: dict, i: int):
-        """`predict` and the force basis' responses (W, n, M), the resonant terms' columns last."""
+        """`predict` and the force basis' responses (W, n, M): the axles' own, the common part's, the
+        band's (summed over the axles), the resonant terms' last."""
         args = (p["EI"], p["zeta"], p["v"][i], p["t0"][i])
         mu, R = self.model.responses(*args, basis=True)
         if self.sprung:
@@ -122,7 +129,11 @@ class CrossingTerm:
         ):  # the shared part's columns: the axles' columns summed, basis function by function
             J, M = self.model.loads.size, self.model.n_basis
             shared = R[:, :, : J * M].reshape(*R.shape[:2], J, M).sum(axis=2)
-            R = np.concatenate([R, shared], axis=2)
+            R = np.concatenate([R[:, :, : J * M], shared, R[:, :, J * M :]], axis=2)
+        if self.model.n_band:  # the band: one set of weights for all axles
+            J, B = self.model.loads.size, self.model.n_band
+            band = R[:, :, -J * B :].reshape(*R.shape[:2], J, B).sum(axis=2)
+            R = np.concatenate([R[:, :, : -J * B], band], axis=2)
         if self.resonance is not None:
             t0 = np.broadcast_to(np.asarray(p["t0"][i], float), mu.shape[:1])
             R = np.concatenate([R, self.resonance.columns(self.model, t0)], axis=2)
@@ -138,6 +149,11 @@ class CrossingTerm:
         if self.common:
             r = np.asarray(p["r"], float)[:, None]
             d = np.concatenate([d * np.sqrt(1.0 - r), f * np.sqrt(r)], axis=1)
+        if self.model.n_band:
+            start, count = self.model.band
+            ab, _, _ = basis_frequencies(self.model.L / p["v"][i], count, start)
+            tail = relative_force_sd(ab, p["v"][i], p["fb"][i], p["zb"][i])
+            d = np.concatenate([d, tail * np.asarray(p["tail"], float)[:, None]], axis=1)
         if self.resonance is None:
             return d
         body = (p["fb"][i], p["zb"][i]) if self.sprung else None
@@ -156,6 +172,8 @@ class Layout:
             names += ["log_s", "log_l", "log_sigma"]
             if any(c.common for c in terms):
                 names.append("logit_r")
+            if any(c.model.n_band for c in terms):
+                names.append("log_tail")
             if any(c.resonance is not None for c in terms):
                 names += list(RESONANT_NAMES)
         #: the hyperparameters: the force law's, the noise sd, the axles' correlation, the resonant terms'
@@ -220,6 +238,7 @@ class CrossingsLogPosterior:
             out["l"] = np.exp(th[:, L.index["log_l"]])
             out["sigma"] = np.exp(th[:, L.index["log_sigma"]])
             out["r"] = 1.0 / (1.0 + np.exp(-L.col(th, "logit_r", -np.inf)))
+            out["tail"] = np.exp(L.col(th, "log_tail", 0.0))
         if self.resonant:
             for k in ("q1", "q2", "z2"):
                 out[k] = np.exp(th[:, L.index[f"log_{k}"]])
@@ -247,6 +266,8 @@ class CrossingsLogPosterior:
             if "logit_r" in L.index:  # r uniform on [0, 1]: the logistic density on logit r
                 u = th[:, L.index["logit_r"]]
                 lp = lp - np.abs(u) - 2.0 * np.log1p(np.exp(-np.abs(u)))
+            if "log_tail" in L.index:
+                lp = lp + _normal(th[:, L.index["log_tail"]], 0.0, TAIL_LOG_SD)
         if self.resonant:
             for k in ("log_q1", "log_q2"):
                 lp = lp + _normal(th[:, L.index[k]], math.log(AMPLITUDE_MEDIAN), AMPLITUDE_LOG_SD)

@@ -16,7 +16,7 @@ from scipy.optimize import least_squares
 from ..config import Config
 from ..data.measurements import Measurements
 from ..uq.modal_mcmc import TRUNCATION_FRACTION
-from . import resonance
+from . import resonance, tail
 from .checks import split_crossings
 from .curvature import curvature_sds
 from .forward import CrossingModel
@@ -31,15 +31,21 @@ from .resonance import NAMES as RESONANT_NAMES
 BASIS_MODES = 1
 
 
-def terms(cfg: Config, data: Measurements, n_modes: int, forces: bool) -> list[CrossingTerm]:
+def terms(
+    cfg: Config, data: Measurements, n_modes: int, forces: bool, band: bool = False
+) -> list[CrossingTerm]:
+    """Each crossing's `CrossingTerm`; band: with fluctuating forces, the force spectrum's band near the
+    first mode (`tail`; the timing diagnostic's option, not the reference's law)."""
     a_u, a_xx = data.weights
     out = []
     for name, rows, veh in split_crossings(cfg, data):
         nb = n_basis_for(cfg.beam.length / veh.speed) if forces else 0
+        b = cfg.beam
+        extra = tail.band_of(b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed, nb)
         model = CrossingModel(
-            cfg.beam.length, cfg.beam.mass_per_length, veh.loads, veh.offsets,
+            b.length, b.mass_per_length, veh.loads, veh.offsets,
             data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
-            basis_modes=min(n_modes, BASIS_MODES),
+            basis_modes=min(n_modes, BASIS_MODES), band=extra if forces and band else None,
         )  # fmt: skip
         res = (
             Resonance.build(model, veh.speed, veh.entry_time, cfg.prior.EI_median)
@@ -172,6 +178,8 @@ def fluctuation_start(post: CrossingsLogPosterior, th: np.ndarray, sigma: float)
     th[idx["log_sigma"]] = math.log(sigma)
     if "logit_r" in idx:
         th[idx["logit_r"]] = 0.0  # the axles' correlation at its prior median, 1/2
+    if "log_tail" in idx:
+        th[idx["log_tail"]] = 0.0  # the band's level at its prior median
     if post.resonant:
         th[idx["log_q1"]] = th[idx["log_q2"]] = math.log(AMPLITUDE_MEDIAN)
         th[idx["log_z2"]] = math.log(post.mode_damping_prior[0])
@@ -208,6 +216,6 @@ def step(name: str, post: CrossingsLogPosterior) -> float:
         return 1e-5
     if name.startswith(("log_fb[", "log_zb[")):
         return 1e-2
-    if name in RESONANT_NAMES or name == "logit_r":
+    if name in RESONANT_NAMES or name in ("logit_r", "log_tail"):
         return 1e-2
     return {"log_EI": 1e-4, "log_zeta": 1e-2, "log_s": 1e-2, "log_l": 1e-2, "log_sigma": 1e-3}[name]

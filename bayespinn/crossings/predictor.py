@@ -73,6 +73,7 @@ class CrossingsPredictor:
         model = CrossingModel(
             c.model.L, c.model.mu, c.model.loads, c.model.offsets, x, t, a_u, a_xx,
             n_modes=max(c.model.n_modes, PREDICT_MODES), n_basis=nb, basis_modes=c.model.basis_modes,
+            band=c.model.band if nb else None,
         )  # fmt: skip
         view = dataclasses.replace(c, model=model)
         out = []
