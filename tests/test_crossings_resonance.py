@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 import pytest
+from gauges import three_gauges
 
 from bayespinn.crossings.forward import CrossingModel
 from bayespinn.crossings.resonance import Resonance, coupled_mode
@@ -47,13 +48,8 @@ def test_coupled_mode_is_vectorised_row_by_row():
 @pytest.fixture(scope="module")
 def gauges():
     """Two strain gauges and a deflection point read at 200 Hz for 4 s, the lorry entering at 0.5 s."""
-    t = np.arange(0.0, 4.0, 1 / 200)
-    xs = [(6.0, 0.0, -0.4), (10.0, 0.0, -0.4), (13.0, 1.0, 0.0)]
-    x = np.concatenate([np.full(t.size, a) for a, _, _ in xs])
-    a_u = np.concatenate([np.full(t.size, b) for _, b, _ in xs])
-    a_xx = np.concatenate([np.full(t.size, c) for _, _, c in xs])
     loads = np.array([60e3, 90e3])
-    model = CrossingModel(L, MU, loads, OFFSETS, x, np.tile(t, 3), a_u, a_xx, n_modes=8)
+    model = CrossingModel(L, MU, loads, OFFSETS, *three_gauges(4.0, 200), n_modes=8)
     return model, Resonance.build(model, 10.0, 0.5, EI)
 
 

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from gauges import three_gauges
 
 from bayespinn.crossings.forward import CrossingModel
 from bayespinn.crossings.likelihood import CrossingTerm, woodbury_loglik
@@ -20,13 +21,9 @@ LOADS, OFFSETS = np.array([60e3, 90e3]), np.array([0.0, 4.0])
 
 def term(common: bool = True) -> CrossingTerm:
     """Two strain gauges and a deflection point at 100 Hz for 3.5 s, the lorry entering at 0.5 s."""
-    t = np.arange(0.0, 3.5, 1 / 100)
-    xs = [(6.0, 0.0, -0.4), (10.0, 0.0, -0.4), (13.0, 1.0, 0.0)]
-    x = np.concatenate([np.full(t.size, a) for a, _, _ in xs])
-    a_u = np.concatenate([np.full(t.size, b) for _, b, _ in xs])
-    a_xx = np.concatenate([np.full(t.size, c) for _, _, c in xs])
+    x, t, a_u, a_xx = three_gauges(3.5, 100)
     model = CrossingModel(
-        L, MU, LOADS, OFFSETS, x, np.tile(t, 3), a_u, a_xx, n_modes=8, n_basis=12, basis_modes=1
+        L, MU, LOADS, OFFSETS, x, t, a_u, a_xx, n_modes=8, n_basis=12, basis_modes=1
     )
     rows = np.arange(x.size)
     return CrossingTerm("c", rows, np.zeros(x.size), model, V, 0.0, T0, 0.0, common=common)

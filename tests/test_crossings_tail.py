@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 import pytest
+from gauges import three_gauges
 from scipy import signal
 
 from bayespinn.crossings import tail
@@ -22,18 +23,17 @@ LOADS, OFFSETS = np.array([60e3, 90e3]), np.array([0.0, 4.0])
 M = 12
 
 
-def sensors():
-    t = np.arange(0.0, 3.5, 1 / 200)
-    xs = [(6.0, 0.0, -0.4), (10.0, 0.0, -0.4), (13.0, 1.0, 0.0)]
-    x = np.concatenate([np.full(t.size, a) for a, _, _ in xs])
-    a_u = np.concatenate([np.full(t.size, b) for _, b, _ in xs])
-    a_xx = np.concatenate([np.full(t.size, c) for _, _, c in xs])
-    return x, np.tile(t, 3), a_u, a_xx
-
-
 def model(n_basis=M, band=None):
     return CrossingModel(
-        L, MU, LOADS, OFFSETS, *sensors(), n_modes=8, n_basis=n_basis, basis_modes=2, band=band
+        L,
+        MU,
+        LOADS,
+        OFFSETS,
+        *three_gauges(3.5, 200),
+        n_modes=8,
+        n_basis=n_basis,
+        basis_modes=2,
+        band=band,
     )
 
 
@@ -110,7 +110,7 @@ def test_the_posterior_reads_the_band_level(carried):
     control)."""
     start, count = BAND
     term = CrossingTerm(
-        "c", np.arange(sensors()[0].size), np.zeros(1), model(band=BAND), V, 0.0, T0, 0.0,
+        "c", np.arange(three_gauges(3.5, 200)[0].size), np.zeros(1), model(band=BAND), V, 0.0, T0, 0.0,
         common=True,
     )  # fmt: skip
     _, R = term.responses(params(), 0)
