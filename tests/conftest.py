@@ -28,6 +28,12 @@ _give_each_xdist_worker_its_own_cores()
 import numpy as np  # noqa: E402 - after the thread settings above
 import pytest  # noqa: E402
 
+from bayespinn.uq.arviz_import import import_arviz  # noqa: E402
+
+# every test process imports ArviZ here, once, through the guard against its stamp-file race (two
+# workers importing it in the same second); test modules' own `import arviz` then finds it loaded
+import_arviz()
+
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 

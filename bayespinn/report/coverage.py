@@ -31,10 +31,12 @@ def rank_ecdf_figure(
     `replicates` and `level` (a coverage study's table row), ranks in [0, 1]. `band`: the simultaneous
     band's probability; `false_failure`: the acceptance region's; `label(row)`: a panel's title (default:
     method and SNR). Returns the PNG's path."""
-    import arviz as az
     from scipy import stats
 
+    from ..uq.arviz_import import import_arviz
     from ..uq.coverage import binomial_acceptance
+
+    az = import_arviz()
 
     if not studies:
         raise ValueError("no study to draw")

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .arviz_import import import_arviz
+
 #: posterior predictive draws written beside the posterior (`Posterior.to_inference_data`)
 PREDICTIVE_DRAWS = 200
 
@@ -41,7 +43,7 @@ def central_interval(draws: np.ndarray, level: float) -> tuple[float, float]:
 
 def mcmc_diagnostics(x: np.ndarray) -> dict:
     """R-hat and bulk/tail ESS of draws shaped (chain, draw), from ArviZ (rank-normalised split R-hat)."""
-    import arviz as az
+    az = import_arviz()
 
     x = np.asarray(x, float)
     if x.ndim != 2 or x.shape[0] < 2 or x.shape[1] < 4:
@@ -146,7 +148,7 @@ class Posterior:
         """ArviZ InferenceData: `posterior` (EI, sigma; chain, draw) and `sample_stats` where the method is a
         sampler; with the data also `observed_data` and `constant_data` (y, x, t by observation) and
         `posterior_predictive` (y at the data points, `predictive_draws`, one chain)."""
-        import arviz as az
+        az = import_arviz()
 
         attrs = {"method": self.method, "runtime_s": float(self.runtime_s)}
         for k, v in {**self.diagnostics, **self.info}.items():
@@ -192,7 +194,7 @@ class Posterior:
     @classmethod
     def from_netcdf(cls, path: str | Path) -> Posterior:
         """Read a posterior written by `to_netcdf`."""
-        import arviz as az
+        az = import_arviz()
 
         idata = az.from_netcdf(path, engine="h5netcdf")
         post = idata.posterior
