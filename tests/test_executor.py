@@ -388,7 +388,7 @@ def test_coverage_datasets_are_independent_across_snr_and_shared_across_methods(
 
 def test_bench_run_breaks_the_quick_start_down_by_method():
     """`bench --run`: the quick start's analysis (here at the smoke profile), its wall time and each method's
-    share; the shares cannot exceed the wall time."""
+    share; the shares cannot exceed the wall time; then the time to write its run folder (the report)."""
     from bayespinn.bench import bench_run
 
     r = bench_run(device="cpu", progress=False, profile="smoke")
@@ -396,6 +396,7 @@ def test_bench_run_breaks_the_quick_start_down_by_method():
     assert set(r["time_breakdown_s"]) == {"modal_mcmc", "ensemble", "bpinn"}
     walls = [v["wall"] for v in r["time_breakdown_s"].values()]
     assert all(w > 0 for w in walls) and sum(walls) <= r["wall_s"]
+    assert r["report_s"] > 0
 
 
 def _grad_of_cube(x: float) -> float:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import json
 import logging
 import re
 from pathlib import Path
@@ -129,6 +130,16 @@ def test_reports_are_a_function_of_the_result(defl, tmp_path):
     write_reports(res, cfg, tmp_path)
     for f in RUN_FIGURES + ("report.md",):
         assert (tmp_path / f).read_bytes() == (out / f).read_bytes(), f
+
+
+def test_the_manifest_file_records_the_reports_time(defl):
+    """manifest.json carries the analysis' timings and the report's (`report_s`); the result keeps only the
+    analysis', so a report written from it again is the same report."""
+    cfg, res, out = defl
+    on_disk = json.loads((out / "manifest.json").read_text())["timings_s"]
+    assert on_disk["report_s"] > 0
+    assert on_disk["total_s"] == res.manifest["timings_s"]["total_s"]
+    assert "report_s" not in res.manifest["timings_s"]
 
 
 def _pinn_like(cfg, res) -> RunResult:

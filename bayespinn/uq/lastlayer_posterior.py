@@ -92,6 +92,14 @@ class LastLayerPosterior:
             half *= 2.0
         return float("nan")
 
+    def weights_factor(
+        self, log_theta: float, log_sigma: float, z: float | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mean (k,) and lower Cholesky factor (k, k) of the output weights' posterior given theta, sigma
+        (and z): what one predictive weight draw needs."""
+        mean, cov = self.weights_posterior(log_theta, log_sigma, z)
+        return mean, torch.linalg.cholesky(cov + 1e-30 * torch.eye(self.k, dtype=torch.float64))
+
     def predictive(
         self,
         x,
@@ -101,9 +109,12 @@ class LastLayerPosterior:
         draws_log_sigma,
         rng: np.random.Generator,
         draws_z=None,
+        factors: dict | None = None,
     ) -> np.ndarray:
         """Draws (S, P) of u [m] (kx=0) or u_xx [1/m] (kx=2) at x [m], t [s], one weight draw per (theta, sigma)
-        (and AR(1) coefficient's z, `draws_z`; default `self.z`)."""
+        (and AR(1) coefficient's z, `draws_z`; default `self.z`). `factors`: a dict that keeps each
+        (theta, sigma, z)'s `weights_factor` for the next call with the same draws (building the weights'
+        posterior is the cost of a draw; the report asks for the same draws at many points)."""
         sc = self.sc
         T = lambda a: torch.as_tensor(np.array(a, float).ravel(), dtype=torch.float64)  # noqa: E731
         xi, tau = T(x) / sc.L, T(t) / sc.T
@@ -112,14 +123,22 @@ class LastLayerPosterior:
         scale = sc.U / sc.L**kx
         out = np.empty((len(draws_log_theta), Phi_f.shape[0]))
         zs = [None] * len(draws_log_theta) if draws_z is None else draws_z
+        factors = {} if factors is None else factors
+        jv = None
+        if self.fv is not None:
+            # the first mode's columns at every draw's theta, as one batch (S, P, nv)
+            lts = torch.as_tensor(np.asarray(draws_log_theta, float).ravel(), dtype=torch.float64)
+            with torch.no_grad():
+                jv = self.fv.jet(
+                    xi.expand(lts.numel(), -1), tau.expand(lts.numel(), -1), kx, 0, lts
+                )
+            jv = jv.dx(kx)
         for i, (lt, ls, zz) in enumerate(zip(draws_log_theta, draws_log_sigma, zs, strict=True)):
-            mean, cov = self.weights_posterior(float(lt), float(ls), zz)
-            Phi = Phi_f
-            if self.fv is not None:
-                with torch.no_grad():
-                    jv = self._fv_jet(xi, tau, kx, 0, torch.tensor(float(lt), dtype=torch.float64))
-                Phi = torch.cat([Phi_f, jv.dx(kx)], dim=1)
-            Lc = torch.linalg.cholesky(cov + 1e-30 * torch.eye(self.k, dtype=torch.float64))
+            key = (float(lt), float(ls), None if zz is None else float(zz))
+            if key not in factors:
+                factors[key] = self.weights_factor(*key)
+            mean, Lc = factors[key]
+            Phi = Phi_f if jv is None else torch.cat([Phi_f, jv[i]], dim=1)
             z = torch.as_tensor(rng.standard_normal(self.k), dtype=torch.float64)
             out[i] = (Phi @ (mean + Lc @ z)).numpy() * scale
         return out
@@ -146,16 +165,24 @@ class LastLayerPredictor:
         z: np.ndarray | None = None,
     ):
         self.ll, self.lt, self.ls, self.shift, self.z = ll, log_theta, log_sigma, shift, z
+        #: the order the posterior draws are used in (drawn from the first call's rng), and the weights'
+        #: posterior of each draw used so far: every call takes the first n_draws of one random order, so a
+        #: report's many calls (instants, quantities, sensors) build each draw's weights posterior once
+        self._order: np.ndarray | None = None
+        self._factors: dict = {}
 
     def __call__(
         self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None
     ) -> np.ndarray:
         rng = rng or np.random.default_rng(0)
-        idx = rng.choice(self.lt.size, size=min(n_draws, self.lt.size), replace=False)
+        if self._order is None:
+            self._order = rng.permutation(self.lt.size)
+        idx = self._order[: min(n_draws, self.lt.size)]
         z = None if self.z is None else self.z[idx]
+        args = (self.lt[idx], self.ls[idx], rng, z, self._factors)
         if quantity == "deflection":
-            return self.ll.predictive(x, t, 0, self.lt[idx], self.ls[idx], rng, z)
+            return self.ll.predictive(x, t, 0, *args)
         if quantity in ("curvature", "moment"):
-            k = self.ll.predictive(x, t, 2, self.lt[idx], self.ls[idx], rng, z)
+            k = self.ll.predictive(x, t, 2, *args)
             return -np.exp(self.lt[idx] + self.shift)[:, None] * k if quantity == "moment" else k
         raise ValueError(f"quantity must be deflection, moment or curvature, got {quantity!r}")
