@@ -14,7 +14,7 @@ from scipy.stats import multivariate_normal
 import bayespinn as bp
 from bayespinn.crossings import check_crossings, crossings_reference, needs_crossings
 from bayespinn.crossings.forward import CrossingModel, basis_functions
-from bayespinn.crossings.likelihood import woodbury_loglik
+from bayespinn.crossings.likelihood import cho_solve, tri_solve, woodbury_loglik
 from bayespinn.data.synthetic import sample_layout
 from bayespinn.errors import InputError
 from bayespinn.physics.fem import FEBeam, FESettings
@@ -132,6 +132,22 @@ def test_woodbury_equals_dense_gaussian():
         for i in range(W)
     ]
     np.testing.assert_allclose(mine, dense, rtol=1e-10)
+
+
+def test_triangular_solves_equal_general_ones():
+    """`tri_solve` (C^-1 B and C'^-1 B) and `cho_solve` ((C C')^-1 B) on a batch, against numpy's general
+    solver; the transposed solve is not the plain one (negative control)."""
+    rng = np.random.default_rng(4)
+    W, K, m = 3, 30, 4
+    X = rng.standard_normal((W, K, K))
+    A = X @ np.swapaxes(X, 1, 2) + K * np.eye(K)
+    C = np.linalg.cholesky(A)
+    B = rng.standard_normal((W, K, m))
+    np.testing.assert_allclose(tri_solve(C, B), np.linalg.solve(C, B), rtol=1e-10, atol=1e-12)
+    up = np.linalg.solve(np.swapaxes(C, 1, 2), B)
+    np.testing.assert_allclose(tri_solve(C, B, transposed=True), up, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(cho_solve(C, B), np.linalg.solve(A, B), rtol=1e-10, atol=1e-12)
+    assert np.abs(tri_solve(C, B) - up).max() > 1e-3
 
 
 def test_nothing_declared_is_todays_reference():

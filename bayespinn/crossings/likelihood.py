@@ -32,6 +32,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg as sla
 
 from ..uq.priors import EIPrior, NoisePrior
 from .forward import CrossingModel, basis_frequencies
@@ -341,11 +342,25 @@ def woodbury_loglik(r: np.ndarray, B: np.ndarray, sig2: np.ndarray) -> np.ndarra
     A = G / sig2[:, None, None] + np.eye(M)[None]
     C = np.linalg.cholesky(A)
     logdet = 2.0 * np.sum(np.log(np.diagonal(C, axis1=1, axis2=2)), axis=1)
-    z = np.linalg.solve(C, (b / np.sqrt(sig2)[:, None])[:, :, None])[
-        :, :, 0
-    ]  # |z|^2 = b'A^-1 b / s2
+    z = tri_solve(C, (b / np.sqrt(sig2)[:, None])[:, :, None])[:, :, 0]  # |z|^2 = b'A^-1 b / s2
     quad = (np.einsum("wn,wn->w", r, r) - np.einsum("wm,wm->w", z, z)) / sig2
     return -0.5 * (logdet + quad)
+
+
+def tri_solve(C: np.ndarray, B: np.ndarray, *, transposed: bool = False) -> np.ndarray:
+    """C^-1 B, or C'^-1 B with `transposed`, for lower-triangular C (W, K, K) and B (W, K, m), batched over
+    the leading axis: a triangular solve costs K^2 m where a general (LU) solve costs 2 K^3 / 3."""
+    out = np.empty(B.shape, dtype=np.result_type(C, B))
+    for w in range(B.shape[0]):
+        out[w] = sla.solve_triangular(
+            C[w], B[w], lower=True, trans=1 if transposed else 0, check_finite=False
+        )
+    return out
+
+
+def cho_solve(C: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """A^-1 B for A = C C' (C lower-triangular, (W, K, K)) and B (W, K, m): two triangular solves."""
+    return tri_solve(C, tri_solve(C, B), transposed=True)
 
 
 def _normal(x: np.ndarray, mean: float, sd: float) -> np.ndarray:

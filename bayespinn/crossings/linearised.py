@@ -36,7 +36,9 @@ from .likelihood import (
     BODY_DAMPING_LOG_SD,
     BODY_FREQUENCY_LOG_SD,
     CrossingsLogPosterior,
+    cho_solve,
     rows_of,
+    tri_solve,
     woodbury_loglik,
 )
 
@@ -245,14 +247,14 @@ class Linearisation:
             const += -0.5 * rr / s2 + 0.5 * np.sum(np.log(p_o)) - 0.5 * np.sum(p_o * m_o**2)
             C = np.linalg.cholesky(A_oo)
             logdet += 2 * np.sum(np.log(np.diagonal(C, axis1=1, axis2=2)), axis=1)
-            Y = np.linalg.solve(A_oo, np.concatenate([c_o[:, :, None], np.swapaxes(A_so, 1, 2)], 2))
+            Y = cho_solve(C, np.concatenate([c_o[:, :, None], np.swapaxes(A_so, 1, 2)], 2))
             quad += np.einsum("wk,wk->w", c_o, Y[:, :, 0])
             A_ss = A_ss + G_ss - A_so @ Y[:, :, 1:]
             c_s = c_s + g_s - np.einsum("wsk,wk->ws", A_so, Y[:, :, 0])
             local.append((C, c_o, A_so, Y))
         Cs = np.linalg.cholesky(A_ss)
         logdet += 2 * np.sum(np.log(np.diagonal(Cs, axis1=1, axis2=2)), axis=1)
-        mean_s = np.linalg.solve(A_ss, c_s[:, :, None])[:, :, 0]
+        mean_s = cho_solve(Cs, c_s[:, :, None])[:, :, 0]
         quad += np.einsum("ws,ws->w", c_s, mean_s)
         return const - 0.5 * logdet + 0.5 * quad, (Cs, mean_s, local)
 
@@ -272,16 +274,16 @@ class Linearisation:
             d_s = mean_s
             if rng is not None:  # A_ss = Cs Cs': a draw is mean + Cs'^-1 z
                 z = rng.standard_normal(mean_s.shape)
-                d_s = mean_s + np.linalg.solve(np.swapaxes(Cs, 1, 2), z[:, :, None])[:, :, 0]
+                d_s = mean_s + tri_solve(Cs, z[:, :, None], transposed=True)[:, :, 0]
             out[sl, self.shared] += d_s
             for b, (C, c_o, A_so, _) in zip(self.blocks, local, strict=True):
                 if not b.own:
                     continue
                 rhs = c_o - np.einsum("wsk,ws->wk", A_so, d_s)
-                m = np.linalg.solve(np.einsum("wij,wkj->wik", C, C), rhs[:, :, None])[:, :, 0]
+                m = cho_solve(C, rhs[:, :, None])[:, :, 0]
                 if rng is not None:
                     z = rng.standard_normal(m.shape)
-                    m = m + np.linalg.solve(np.swapaxes(C, 1, 2), z[:, :, None])[:, :, 0]
+                    m = m + tri_solve(C, z[:, :, None], transposed=True)[:, :, 0]
                 out[sl, b.own] += m[:, : len(b.own)]
         return out
 
@@ -307,7 +309,7 @@ class Linearisation:
             A = G / s2[:, None, None] + np.eye(G.shape[1])[None]
             C = np.linalg.cholesky(A)
             logdet = 2 * np.sum(np.log(np.diagonal(C, axis1=1, axis2=2)), axis=1)
-            z = np.linalg.solve(C, (bvec / np.sqrt(s2)[:, None])[:, :, None])[:, :, 0]
+            z = tri_solve(C, (bvec / np.sqrt(s2)[:, None])[:, :, None])[:, :, 0]
             out += -0.5 * (logdet + (rr - np.einsum("wm,wm->w", z, z)) / s2)
         return out
 
