@@ -324,6 +324,53 @@ def summarise(records: list[dict], which: str) -> dict:
     }
 
 
+#: a nuisance's posterior "holds" its truth within this many of its posterior sds
+NUISANCE_Z = 2.0
+
+
+def nuisance_z(rec: dict, name: str) -> float | None:
+    """(posterior mean - truth) / posterior sd of a declared nuisance ("speed", "entry_time",
+    "body_frequency", "damping_ratio") of one record; None where the record lacks it."""
+    e, truth = (rec.get("declared") or {}).get(name), rec["truth_and_stated"].get(name)
+    if not e or truth is None or not e.get("sd"):
+        return None
+    return (e["mean"] - truth) / e["sd"]
+
+
+def nuisances(records: list[dict]) -> dict:
+    """How the declared analysis' nuisances sit against their truths, and whether EI's misses follow them:
+    each nuisance's rms z; EI's rms z over the crossings whose speed posterior holds the truth within
+    NUISANCE_Z sds and over those where it does not; the correlation of EI's z with the speed's z."""
+    rows = [
+        (r["declared"]["z"], *(nuisance_z(r, k) for k in ("speed", "entry_time", "body_frequency")))
+        for r in records
+        if "declared" in r
+    ]
+    rows = [row for row in rows if row[1] is not None and row[2] is not None]
+    if len(rows) < 2:
+        return {"n": len(rows)}
+    z = np.array([[np.nan if v is None else v for v in row] for row in rows], float)
+
+    def rms(v: np.ndarray) -> float | None:
+        v = v[np.isfinite(v)]
+        return float(np.sqrt(np.mean(v * v))) if v.size else None
+
+    near = np.abs(z[:, 1]) <= NUISANCE_Z
+    return {
+        "n": len(rows),
+        "rms_z": {
+            "EI": rms(z[:, 0]),
+            "speed": rms(z[:, 1]),
+            "entry_time": rms(z[:, 2]),
+            "body_frequency": rms(z[:, 3]),
+        },
+        "speed_within": int(near.sum()),
+        "EI_rms_z_speed_within": rms(z[near, 0]),
+        "EI_rms_z_speed_beyond": rms(z[~near, 0]),
+        "corr_EI_speed": float(np.corrcoef(z[:, 0], z[:, 1])[0, 1]),
+    }
+
+
 def summary(doc: dict, planned: int) -> dict:
     recs = doc["records"]
     a, b = summarise(recs, "declared"), summarise(recs, "today")
@@ -333,6 +380,7 @@ def summary(doc: dict, planned: int) -> dict:
         "partial": len(recs) < planned,
         "declared": a,
         "today": b,
+        "declared_nuisances": nuisances(recs),
     }
     if a.get("n"):
         out["declared_fits_target_met"] = a["fits_rate"] >= FITS_TARGET
@@ -411,7 +459,8 @@ def write_study(out: Path, args, argv, key: str, planned: int) -> dict:
         doc["joint"] = joint_ratio(old["joint"], doc["records"])
     doc["summary"] = summary(doc, max(planned, old.get("summary", {}).get("planned", 0)))
     c.write_json(path, {k: v for k, v in doc.items() if k != "records"} | {"records": [
-        f"g{r['girder']}-c{r['crossing']}" for r in doc["records"]]})  # fmt: skip
+        {"id": f"g{r['girder']}-c{r['crossing']}", **{k: r.get("provenance", {}).get(k) for k in (
+            "git_commit", "git_dirty")}} for r in doc["records"]]})  # fmt: skip
     write_page(out, doc)
     return doc
 
@@ -578,6 +627,8 @@ def write_page(out: Path, doc: dict) -> None:
                 if e
                 else ["n/a"] * 3
             )
+            if name == "declared":
+                cells += [_num(nuisance_z(r, k), "+.1f") for k in ("speed", "entry_time")]
         per.append(cells)
     if per:
         blocks.append(Heading("Per crossing"))
@@ -593,12 +644,30 @@ def write_page(out: Path, doc: dict) -> None:
                     "(a) z",
                     "(a) hit",
                     "(a) fit",
+                    "(a) speed z",
+                    "(a) entry z",
                     "(b) z",
                     "(b) hit",
                     "(b) fit",
                 ],
                 per,
             )  # fmt: skip
+        )
+    nu = s.get("declared_nuisances") or {}
+    if nu.get("n", 0) >= 2:
+        rz = nu["rms_z"]
+        blocks.append(Heading("What the declared misses share"))
+        blocks.append(
+            Paragraph(
+                f"Over {nu['n']} declared analyses, the rms z against the truth (1 for a calibrated "
+                f"posterior): EI {_num(rz['EI'])}, speed {_num(rz['speed'])}, entry time "
+                f"{_num(rz['entry_time'])}, bounce frequency {_num(rz['body_frequency'])}. EI's z "
+                f"correlates with the speed's by {nu['corr_EI_speed']:+.2f}. Where the speed's "
+                f"posterior holds the truth within {NUISANCE_Z:g} sd ({nu['speed_within']} "
+                f"crossings), EI's rms z is {_num(nu['EI_rms_z_speed_within'])}; where it does not "
+                f"({nu['n'] - nu['speed_within']}), {_num(nu['EI_rms_z_speed_beyond'])}. "
+                "(a) speed z, (a) entry z: the declared posterior's mean against the truth, in its sds."
+            )
         )
     j = doc.get("joint")
     blocks.append(Heading("Several crossings in one analysis"))
@@ -647,8 +716,8 @@ def _converged_cell(a: dict) -> str:
     return f"{a['converged']}" + (f" ({missing} not judged)" if missing else "")
 
 
-def _num(v) -> str:
-    return "n/a" if v is None else f"{v:.2f}"
+def _num(v, fmt: str = ".2f") -> str:
+    return "n/a" if v is None else format(v, fmt)
 
 
 # ------------------------------------------------------------------------------------------ main

@@ -386,6 +386,37 @@ def _crossings() -> Section:
                 "d",
             )
         )
+    if (doc["summary"].get("declared_nuisances") or {}).get("n", 0) >= 2:
+        k = "summary.declared_nuisances"
+        out += [
+            Entry("declared: rms z of EI", CROSSINGS, f"{k}.rms_z.EI", ".2f"),
+            Entry("declared: rms z of the speed", CROSSINGS, f"{k}.rms_z.speed", ".2f"),
+            Entry("declared: rms z of the entry time", CROSSINGS, f"{k}.rms_z.entry_time", ".2f"),
+            Entry(
+                "declared: correlation of EI's z with the speed's",
+                CROSSINGS,
+                f"{k}.corr_EI_speed",
+                "+.2f",
+            ),  # fmt: skip
+            Entry(
+                "declared: crossings whose speed holds the truth within 2 sd",
+                CROSSINGS,
+                f"{k}.speed_within",
+                "d",
+            ),  # fmt: skip
+            Entry(
+                "declared: rms z of EI on those crossings",
+                CROSSINGS,
+                f"{k}.EI_rms_z_speed_within",
+                ".2f",
+            ),  # fmt: skip
+            Entry(
+                "declared: rms z of EI on the others",
+                CROSSINGS,
+                f"{k}.EI_rms_z_speed_beyond",
+                ".2f",
+            ),  # fmt: skip
+        ]
     if doc.get("exeter_check"):
         out += [
             Entry(

@@ -67,3 +67,36 @@ def test_speed_stated_three_percent_off_is_a_miss_or_misfit(study):
     s = study.summarise([{"today": e}], "today")
     assert s["hits"] == 0 or s["misfit"] == 1
     assert abs(e["z"]) > 4
+
+
+def _record(ei_z: float, speed_z: float, entry_z: float, fb_z: float | None = None) -> dict:
+    truth = {"speed": 10.0, "entry_time": 0.5, "body_frequency": 2.5}
+    post = lambda k, z: {"mean": truth[k] + 0.1 * z, "sd": 0.1, "ci90": [0, 0]}  # noqa: E731
+    dec = {"z": ei_z, "speed": post("speed", speed_z), "entry_time": post("entry_time", entry_z)}
+    if fb_z is not None:
+        dec["body_frequency"] = post("body_frequency", fb_z)
+    return {"truth_and_stated": truth, "declared": dec}
+
+
+def test_nuisance_summary_separates_misses_that_follow_the_speed(study):
+    """EI's rms z is split by whether the speed's posterior holds its truth, with the correlation: four
+    crossings whose EI misses go with the speed's, against the same EI z's paired with calm speeds."""
+    recs = [_record(3.0, -4.0, -5.0, 1.0), _record(-3.0, 5.0, 4.0), _record(0.5, -0.5, 0.0, 1.0),
+            _record(-1.0, 1.0, 1.0, 3.0)]  # fmt: skip
+    nu = study.nuisances(recs)
+    assert nu["n"] == 4 and nu["speed_within"] == 2
+    assert nu["EI_rms_z_speed_beyond"] == pytest.approx(3.0)
+    assert nu["EI_rms_z_speed_within"] == pytest.approx((0.5**2 / 2 + 1 / 2) ** 0.5)
+    assert nu["rms_z"]["body_frequency"] == pytest.approx(
+        (11 / 3) ** 0.5
+    )  # the record lacking it skipped
+    assert nu["corr_EI_speed"] < -0.9
+    # negative control: the same EI z's beside speeds that hold their truth are not attributed to them
+    calm = study.nuisances(
+        [
+            _record(r["declared"]["z"], s, 0.0)
+            for r, s in zip(recs, (0.3, 0.3, -0.3, -0.3), strict=True)
+        ]
+    )
+    assert calm["speed_within"] == 4 and calm["EI_rms_z_speed_beyond"] is None
+    assert abs(calm["corr_EI_speed"]) < 0.3
