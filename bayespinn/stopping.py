@@ -32,16 +32,48 @@ def stop_workers() -> int:
 
 def _stop_fork_server() -> None:
     """Kill the fork server the local pool starts its workers from (it runs no task and would otherwise
-    linger until it notices this process has gone)."""
+    linger until it notices this process has gone), and every process it forked: a worker whose start
+    the signal interrupted is forked but not yet among this process' children, and would outlive the
+    run. The server is stopped first, so that it forks nothing while its children are found."""
     from multiprocessing import forkserver
 
     server = getattr(forkserver, "_forkserver", None)
     pid = getattr(server, "_forkserver_pid", None)
-    if pid:  # not reaped here: the next pool's `ensure_running` reaps it and starts a new one
+    if not pid:  # not reaped here: the next pool's `ensure_running` reaps it and starts a new one
+        return
+    try:
+        os.kill(pid, signal.SIGSTOP)
+    except OSError:
+        return
+    for child in _children_of(pid):
         try:
-            os.kill(pid, signal.SIGKILL)
+            os.kill(child, signal.SIGKILL)
         except OSError:
             pass
+    try:
+        os.kill(pid, signal.SIGKILL)
+    except OSError:
+        pass
+
+
+def _children_of(pid: int) -> list[int]:
+    """The processes whose parent is pid, from /proc (none where there is no /proc)."""
+    out = []
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return out
+    for name in entries:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat", encoding="ascii", errors="replace") as f:
+                stat = f.read()
+        except OSError:
+            continue
+        if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+            out.append(int(name))
+    return out
 
 
 def _stop(signum, frame):  # noqa: ARG001 - signal handler signature

@@ -104,3 +104,31 @@ def test_the_handler_kills_workers_in_process(tmp_path):
             for f in futs:
                 f.result()
     assert not alive(pids)
+
+
+def test_a_worker_forked_but_not_yet_registered_is_stopped_too():
+    """The race a signal can hit: the fork server has forked a worker whose start the signal interrupted,
+    so the worker is not yet among this process' children. `stop_workers` must kill it with the server
+    (before, it survived the run as an orphan); the started worker is taken out of multiprocessing's
+    registry to stand for that moment."""
+    import multiprocessing
+    import multiprocessing.process as mp_process
+
+    from bayespinn.stopping import stop_workers
+
+    ctx = multiprocessing.get_context("forkserver")
+    p = ctx.Process(target=time.sleep, args=(60,))
+    p.start()
+    try:
+        mp_process._children.discard(
+            p
+        )  # the parent no longer knows it: as if start() was interrupted
+        assert p not in multiprocessing.active_children()
+        stop_workers()
+        deadline = time.monotonic() + 5.0
+        while alive({p.pid}) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not alive({p.pid}), cmdline(p.pid)
+    finally:
+        if alive({p.pid}):
+            os.kill(p.pid, signal.SIGKILL)
