@@ -54,6 +54,26 @@ def _stop_fork_server() -> None:
         os.kill(pid, signal.SIGKILL)
     except OSError:
         pass
+    _forget_fork_server(server, pid)
+
+
+def _forget_fork_server(server, pid: int) -> None:
+    """Reap the killed server and clear multiprocessing's record of it, so that the next pool of this
+    process starts a new one. Left as it was, the record names a server that is dying but not yet reaped:
+    `ensure_running` took it for alive and the next worker's start failed with EOFError."""
+    try:
+        os.waitpid(pid, 0)
+    except ChildProcessError:  # not our child (or already reaped): nothing to wait for
+        pass
+    fd = getattr(server, "_forkserver_alive_fd", None)
+    if fd is not None:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    for name in ("_forkserver_alive_fd", "_forkserver_address", "_forkserver_pid"):
+        if hasattr(server, name):
+            setattr(server, name, None)
 
 
 def _children_of(pid: int) -> list[int]:

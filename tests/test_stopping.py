@@ -132,3 +132,22 @@ def test_a_worker_forked_but_not_yet_registered_is_stopped_too():
     finally:
         if alive({p.pid}):
             os.kill(p.pid, signal.SIGKILL)
+
+
+def test_a_pool_started_after_a_stop_gets_a_new_fork_server():
+    """A process that stopped its workers (a signal handled in an interactive session, or one test after
+    another) must be able to start workers again: the killed fork server is forgotten, not reused."""
+    import multiprocessing
+
+    from bayespinn.stopping import stop_workers
+
+    ctx = multiprocessing.get_context("forkserver")
+    for _ in range(3):
+        p = ctx.Process(target=time.sleep, args=(60,))
+        p.start()
+        try:
+            stop_workers()
+            assert not alive({p.pid}), cmdline(p.pid)
+        finally:
+            if alive({p.pid}):
+                os.kill(p.pid, signal.SIGKILL)
