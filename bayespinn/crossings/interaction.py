@@ -103,7 +103,10 @@ def _newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n):
 
         a_i = A^-1 f_i - A^-1 K (x + dt/2 v) - (I - A^-1 M) (v / (dt/2) + a),
 
-    and A^-1 comes from its Schur complement on the modes (the bodies' block is diagonal)."""
+    and A^-1 comes from its Schur complement on the modes (the bodies' block is diagonal). The whole step,
+    with the constant-force modes' own rule beside it, is then one affine map of the state (x, x', x'',
+    the constant-force modes' (q, q', q'')), built for the block at once, so that the loop over steps is a
+    single small matrix-vector product (the loop's Python overhead was most of a likelihood's cost)."""
     W, Nd, J = omega.shape[0], kn.size, P.size
     D = Nd + J
     Mdiag = np.concatenate([np.ones(Nd), m])
@@ -117,7 +120,16 @@ def _newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n):
     g0c = np.array([h4, h2, 1.0])
     a22 = m + h2 * c + h4 * k  # (W, J): A's bodies block, diagonal
     modes, bodies = np.arange(Nd), np.arange(Nd, D)
-    Q, F = np.empty((n, W, Nd)), np.empty((n, W, J))
+    D3, NS = 3 * D, 3 * D + 3 * Nd
+    # (x, x', x'') -> the same without the step's acceleration; the modes' constant-force map per mode
+    lift = np.zeros((D3, D3))
+    eye = np.eye(D)
+    lift[:D, :D], lift[:D, D : 2 * D], lift[:D, 2 * D :] = eye, dt * eye, h4 * eye
+    lift[D : 2 * D, D : 2 * D], lift[D : 2 * D, 2 * D :] = eye, h2 * eye
+    T0blk = np.zeros((W, 3 * Nd, 3 * Nd))
+    for j in range(Nd):
+        T0blk[:, 3 * j : 3 * j + 3, 3 * j : 3 * j + 3] = T0m[:, j]
+    Z = np.empty((n, W, NS))
     for b0 in range(0, n, BLOCK):
         idx = np.arange(b0, min(n, b0 + BLOCK))
         t = T0 + idx * dt
@@ -157,22 +169,30 @@ def _newmark(L, mu, P, off, m, k, c, kn, omega, zeta, v, t0, T0, dt, n):
         IAM[..., np.arange(D), np.arange(D)] += 1.0
         fN = np.einsum("bwnj,j->bwn", Bt, P)  # the constant forces' modal load (b, W, Nd)
         ga = np.einsum("bwin,bwn->bwi", Ainv[..., :Nd], fN)
-        g0 = (fN / den)[..., None] * g0c
+        # one step as one affine map of the state z = (x, x', x'', s0): a = ga + Ra (x, x', x'')
+        Ra = -np.concatenate([AK, h2 * AK + IAM / h2, IAM], axis=-1)  # (b, W, D, 3D)
+        T = np.zeros(idx.shape + (W, NS, NS))
+        T[..., :D, :D3] = h4 * Ra
+        T[..., D : 2 * D, :D3] = h2 * Ra
+        T[..., 2 * D : D3, :D3] = Ra
+        T[..., :D3, :D3] += lift
+        T[..., D3:, D3:] = T0blk
+        off_v = np.concatenate(
+            [h4 * ga, h2 * ga, ga, ((fN / den)[..., None] * g0c).reshape(*fN.shape[:2], -1)], -1
+        )  # (b, W, NS)
         for ii, i in enumerate(idx):
             if i == 0:  # from rest: M a = f
-                x, xd = np.zeros((W, D)), np.zeros((W, D))
-                xa = np.concatenate([fN[ii], np.zeros((W, J))], 1)
-                s0 = np.zeros((W, Nd, 3))
-                s0[..., 2] = fN[ii]
+                z = np.zeros((W, NS))
+                z[:, 2 * D : 2 * D + Nd] = fN[ii]
+                z[:, D3 + 2 :: 3] = fN[ii]
             else:
-                a = ga[ii] - np.einsum("wij,wj->wi", AK[ii], x + h2 * xd)
-                a -= np.einsum("wij,wj->wi", IAM[ii], xd / h2 + xa)
-                x = x + dt * xd + h4 * (xa + a)
-                xd = xd + h2 * (xa + a)
-                xa = a
-                s0 = np.einsum("wnij,wnj->wni", T0m, s0) + g0[ii]
-            Q[i] = x[:, :Nd] - s0[..., 0]
-            F[i] = -m * xa[:, Nd:] * on[ii]
+                z = np.matmul(T[ii], z[:, :, None])[:, :, 0] + off_v[ii]
+            Z[i] = z
+    t = T0 + np.arange(n) * dt
+    xj = v[None, :, None] * (t[:, None, None] - t0[None, :, None]) - off[None, None]
+    on = (xj >= 0.0) & (xj <= L)  # (n, W, J)
+    Q = Z[..., :Nd] - Z[..., D3::3]
+    F = -m * Z[..., 2 * D + Nd : D3] * on
     return Q, F
 
 

@@ -35,6 +35,7 @@ from .curvature import curvature_sds
 from .likelihood import (
     BODY_DAMPING_LOG_SD,
     BODY_FREQUENCY_LOG_SD,
+    EVAL_CHUNK,
     CrossingsLogPosterior,
     cho_solve,
     rows_of,
@@ -314,7 +315,9 @@ class Linearisation:
         return out
 
 
-def exact_loglik(post: CrossingsLogPosterior, theta: np.ndarray, chunk: int = 16) -> np.ndarray:
+def exact_loglik(
+    post: CrossingsLogPosterior, theta: np.ndarray, chunk: int = EVAL_CHUNK
+) -> np.ndarray:
     """log p(y | theta, h) with the weights integrated out, mu and R at theta (the model itself)."""
     th = np.atleast_2d(theta)
     out = []

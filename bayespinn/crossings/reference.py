@@ -65,6 +65,7 @@ class CrossingsReference(Posterior):
             "axle_force_sd",
             "axle_force_time_scale",
             "axle_force_correlation",
+            "crossing_error",
         ):
             if key in nz:
                 out[key] = _summarise(nz[key], t.get(key))
@@ -116,12 +117,16 @@ def crossings_reference(
     progress: bool = False,
     fit_checks: bool = True,
     laplace: bool | None = None,
+    combine: bool | None = None,
 ) -> CrossingsReference:
     """The reference posterior of EI and of what the crossings leave uncertain (module docstring).
 
     laplace : integrate each crossing's speed and entry time out by Laplace (`crossings.laplace`) and sample
         the shared parameters alone; None: with several crossings and constant forces. False: emcee on
-        every parameter (the brute force it is checked against)."""
+        every parameter (the brute force it is checked against).
+    combine : analyse each crossing on its own and combine EI through a crossing-level error
+        (`crossings.combine`); None: with several crossings and fluctuating forces. False: one model of
+        every crossing, the force law, damping and noise shared."""
     from .predictor import CrossingsPredictor, crossing_fit_checks
 
     t_start = time.perf_counter()
@@ -131,6 +136,14 @@ def crossings_reference(
     s = settings or MCMCSettings()
     m = cfg.model
     forces = m.axle_forces == "fluctuating"
+    if combine is None:
+        combine = forces and len(split_crossings(cfg, data)) > 1
+    if combine:
+        from .combine import combined_reference
+
+        return combined_reference(
+            data, cfg, seed=seed, settings=s, progress=progress, single=crossings_reference
+        )
     damping = (
         (cfg.prior.damping_median, cfg.prior.damping_log_sd) if m.damping == "inferred" else None
     )
