@@ -214,9 +214,15 @@ def entry(m: dict, ei_true: float, runtime: float) -> dict:
         "axle_force_correlation",
         "body_frequency",
         "body_damping",
+        "crossing_error",
     ):
         if k in m:
             out[k] = {q: m[k][q] for q in ("mean", "sd", "ci90")}
+    for name, e in (m.get("crossings") or {}).items():  # several crossings: each one's EI and fit
+        out.setdefault("crossings", {})[name] = {
+            "EI": {q: e[q] for q in ("mean", "sd")} if "EI" in e else None,
+            "fit_check": (e.get("fit_check") or {}).get("verdict"),
+        }
     return out
 
 
@@ -679,6 +685,12 @@ def write_page(out: Path, doc: dict) -> None:
                 f"analysed alone: ratio {_num(j.get('sd_ratio'))} (target <= {SD_RATIO_TARGET}); "
                 "the interval holds the truth: "
                 f"{c.yes_no(j['hit'])}; fit {j['fit_check']['verdict']}; {j['runtime_s']:.0f} s."
+                + (
+                    f" The crossing-level error's sd (relative): {j['crossing_error']['mean']:.2e} "
+                    f"(90 % {j['crossing_error']['ci90'][0]:.2e} to {j['crossing_error']['ci90'][1]:.2e})."
+                    if j.get("crossing_error")
+                    else ""
+                )
             )
         )
     else:

@@ -203,7 +203,10 @@ def combined_reference(data: Measurements, cfg, *, seed, settings, progress: boo
         sub = data.select(np.isin(np.arange(len(data)), rows))
         sub_cfg = dataclasses.replace(cfg, crossings=(tables[name],))
         tasks.append((single, sub, sub_cfg, seeding.child(seed, "emcee", 9400 + j), settings))
-    workers = min(cpu_count(), len(tasks))
+    import multiprocessing as mp
+
+    # one process per core; inside a pool's worker (a daemon may not start processes) one at a time
+    workers = 1 if mp.current_process().daemon else min(cpu_count(), len(tasks))
     singles = Executor(workers=workers).map(_run_single, tasks, desc="crossings", progress=progress)
     prior = EIPrior.from_spec(cfg.prior)
     logs = [np.log(s.EI.ravel()) for s in singles]
