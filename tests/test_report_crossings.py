@@ -27,3 +27,17 @@ def test_several_crossings_carry_their_fit_checks_and_nothing_inferred_gives_no_
                if isinstance(b, Table))  # fmt: skip
     assert [(r[1], r[6]) for r in tab.rows] == [("c0", "fits"), ("c1", "misfit")]
     assert nuisance_section({"methods": {"modal_mcmc": {"EI": _entry(1e9)}}}) == []
+
+
+def test_combined_crossings_show_the_crossing_error_and_each_crossings_own_ei():
+    m = {
+        "EI": _entry(1e9),
+        "crossing_error": _entry(0.002),
+        "crossings": {"c0": {"EI": _entry(1.01e9), "fit_check": {"verdict": "fits"}}},
+    }
+    tab = next(b for b in nuisance_section({"methods": {"modal_mcmc": m}}) if isinstance(b, Table))
+    rows = [(r[1], r[2]) for r in tab.rows]
+    assert rows == [
+        ("all", "crossing-level error of EI (relative sd) (-)"),
+        ("c0", "EI within the combination (N m^2)"),
+    ]  # the shared EI is the headline's, not a nuisance row

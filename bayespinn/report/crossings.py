@@ -17,6 +17,8 @@ NUISANCES = (
     ("axle_force_correlation", "its correlation between axles", "-"),
     ("body_frequency", "suspension bounce frequency", "Hz"),
     ("body_damping", "suspension damping ratio", "-"),
+    ("EI", "EI within the combination", "N m^2"),
+    ("crossing_error", "crossing-level error of EI (relative sd)", "-"),
 )
 HEADER = ("method", "crossing", "quantity", "mean", "sd", "90 % interval", "fit check")
 
@@ -45,7 +47,7 @@ def nuisance_section(summary: dict) -> list[Block]:
     """The section, or nothing when no method inferred any nuisance."""
     rows: list[tuple] = []
     for key, m in summary.get("methods", {}).items():
-        rows += _rows(key, "all", m)
+        rows += _rows(key, "all", {k: v for k, v in m.items() if k != "EI"})
         for cname, e in (m.get("crossings") or {}).items():
             fc = (e.get("fit_check") or {}).get("verdict", "")
             rows += _rows(key, cname, e, fc)
@@ -53,6 +55,7 @@ def nuisance_section(summary: dict) -> list[Block]:
         return []
     cap = (
         "Posteriors of what the recording leaves uncertain; with several crossings each has its own speed "
-        "and entry time and its own fit check."
+        "and entry time and its own fit check (with fluctuating forces also its own damping, force law "
+        "and noise, the 'all' rows then pooling the crossings, and its own EI about the shared one)."
     )
     return [Heading("What the crossing leaves uncertain"), table(HEADER, rows, cap)]
