@@ -39,7 +39,6 @@ from scipy.special import logsumexp
 
 from .. import seeding
 from ..data.measurements import Measurements
-from ..uq import fitcheck
 from ..uq.priors import EIPrior
 
 #: components of each crossing's binned kernel density; points of tau's grid; the grid's last tau in
@@ -157,24 +156,16 @@ class CombinedPredictor:
     points that are not a crossing's own rows are predicted by the first crossing's."""
 
     def __init__(self, singles: list, data: Measurements, rows: list[np.ndarray]):
+        from .predictor import CrossingRows
+
         self.singles = singles
-        strain = np.asarray(data.kind) == "strain"
-        which = np.empty(len(data), int)
-        for i, r in enumerate(rows):
-            which[r] = i
-        self.rows = {
-            "deflection": (data.x[~strain], data.t[~strain], which[~strain]),
-            "curvature": (data.x[strain], data.t[strain], which[strain]),
-        }
+        self.rows = CrossingRows(data, rows)
         self.n = min(int(s.EI.size) for s in singles)
 
     def __call__(self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None):
         rng = rng or np.random.default_rng(0)
         x, t = np.broadcast_arrays(np.asarray(x, float).ravel(), np.asarray(t, float).ravel())
-        kind = "deflection" if quantity == "deflection" else "curvature"
-        rx, rt, which = self.rows[kind]
-        if not (rx.shape == x.shape and np.array_equal(rx, x) and np.array_equal(rt, t)):
-            which = np.zeros(x.size, int)
+        which = self.rows.of(x, t, "deflection" if quantity == "deflection" else "curvature")
         out = None
         for i in np.unique(which):
             sel = which == i
@@ -193,6 +184,7 @@ def combined_reference(data: Measurements, cfg, *, seed, settings, progress: boo
     parallel, then EI combined (module docstring): a `reference.CrossingsReference`."""
     from ..executor import Executor, cpu_count
     from .checks import split_crossings
+    from .predictor import fit_check_on_rows
     from .reference import CrossingsReference
 
     t_start = time.perf_counter()
@@ -233,9 +225,7 @@ def combined_reference(data: Measurements, cfg, *, seed, settings, progress: boo
         nuisance["crossings"][name] = own
         sig2 += len(rows) * s.sigma.ravel()[idx] ** 2
         n_tot += len(rows)
-        sub = data.select(np.isin(np.arange(len(data)), rows))
-        duration = max(float(np.max(sub.t)), 1e-9) if len(sub) else 1.0
-        fc = fitcheck.check(s, sub, cfg.beam.length, duration, seed=0)
+        fc = fit_check_on_rows(s, data, rows, cfg)
         if fc is not None:
             fit_checks[name] = fc
         for p in s.diagnostics.get("problems", []):

@@ -30,6 +30,33 @@ CHUNK = 16
 PREDICT_MODES = 24
 
 
+class CrossingRows:
+    """Which crossing each point of a prediction belongs to: the data's own rows of a quantity are matched
+    to their crossings (what the fit check and the report's predictive draws ask for); other points go
+    to the first crossing."""
+
+    def __init__(self, data: Measurements, rows: list):
+        strain = np.asarray(data.kind) == "strain"
+        which = np.empty(len(data), int)
+        for i, r in enumerate(rows):
+            which[r] = i
+        self.rows = {
+            "deflection": (data.x[~strain], data.t[~strain], which[~strain]),
+            "curvature": (data.x[strain], data.t[strain], which[strain]),
+        }
+
+    def of(self, x: np.ndarray, t: np.ndarray, quantity: str) -> np.ndarray:
+        rx, rt, which = self.rows.get(quantity, (None, None, None))
+        if (
+            rx is not None
+            and rx.shape == x.shape
+            and np.array_equal(rx, x)
+            and np.array_equal(rt, t)
+        ):
+            return which
+        return np.zeros(x.size, int)
+
+
 class CrossingsPredictor:
     """Noise-free predictions of the crossing reference (module docstring)."""
 
@@ -45,25 +72,7 @@ class CrossingsPredictor:
             post.forces
         ):  # the force fluctuation's conditional mean at the posterior mean of the rest
             self.weights = post.force_weights(mean_theta[None])
-        strain = np.asarray(data.kind) == "strain"
-        which = np.empty(len(data), int)
-        for i, c in enumerate(post.terms):
-            which[c.rows] = i
-        self.rows = {
-            "deflection": (data.x[~strain], data.t[~strain], which[~strain]),
-            "curvature": (data.x[strain], data.t[strain], which[strain]),
-        }
-
-    def _crossing_of(self, x, t, quantity) -> np.ndarray:
-        rx, rt, which = self.rows.get(quantity, (None, None, None))
-        if (
-            rx is not None
-            and rx.shape == x.shape
-            and np.array_equal(rx, x)
-            and np.array_equal(rt, t)
-        ):
-            return which
-        return np.zeros(x.size, int)
+        self.rows = CrossingRows(data, [c.rows for c in post.terms])
 
     def response(self, i: int, idx, x, t, a_u, a_xx) -> np.ndarray:
         """Crossing i's response at (x, t) for the draws idx, (len(idx), P)."""
@@ -92,7 +101,7 @@ class CrossingsPredictor:
         x, t = np.broadcast_arrays(np.asarray(x, float).ravel(), np.asarray(t, float).ravel())
         w = quantity_weights(quantity)
         idx = rng.choice(self.n, size=min(n_draws, self.n), replace=False)
-        which = self._crossing_of(x, t, "curvature" if w[1] else "deflection")
+        which = self.rows.of(x, t, "curvature" if w[1] else "deflection")
         out = np.empty((idx.size, x.size))
         for i in np.unique(which):
             sel = which == i
@@ -124,9 +133,14 @@ def crossing_fit_checks(ref: Posterior, data: Measurements, cfg: Config, post) -
     """Each crossing's fit check on its own rows (`uq.fitcheck.check`), by crossing name."""
     out = {}
     for i, c in enumerate(post.terms):
-        sub = data.select(np.isin(np.arange(len(data)), c.rows))
-        duration = max(float(np.max(sub.t)), 1e-9) if len(sub) else 1.0
-        fc = fitcheck.check(_OneCrossing(ref, i), sub, cfg.beam.length, duration, seed=0)
+        fc = fit_check_on_rows(_OneCrossing(ref, i), data, c.rows, cfg)
         if fc is not None:
             out[c.name] = fc
     return out
+
+
+def fit_check_on_rows(post, data: Measurements, rows, cfg: Config) -> dict | None:
+    """`uq.fitcheck.check` of a posterior (or a view of one crossing of it) on the data's given rows."""
+    sub = data.select(np.isin(np.arange(len(data)), rows))
+    duration = max(float(np.max(sub.t)), 1e-9) if len(sub) else 1.0
+    return fitcheck.check(post, sub, cfg.beam.length, duration, seed=0)
