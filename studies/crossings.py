@@ -218,10 +218,10 @@ def entry(m: dict, ei_true: float, runtime: float) -> dict:
     ):
         if k in m:
             out[k] = {q: m[k][q] for q in ("mean", "sd", "ci90")}
-    for name, e in (m.get("crossings") or {}).items():  # several crossings: each one's EI and fit
-        out.setdefault("crossings", {})[name] = {
-            "EI": {q: e[q] for q in ("mean", "sd")} if "EI" in e else None,
-            "fit_check": (e.get("fit_check") or {}).get("verdict"),
+    for name, ce in (m.get("crossings") or {}).items():  # several crossings: each one's EI and fit
+        out.setdefault("per_crossing", {})[name] = {
+            "EI": {q: ce["EI"][q] for q in ("mean", "sd")} if "EI" in ce else None,
+            "fit_check": (ce.get("fit_check") or {}).get("verdict"),
         }
     return out
 
