@@ -105,8 +105,8 @@ def test_combined_intervals_are_calibrated_on_the_hierarchical_model():
 def test_combined_crossings_agree_with_one_model_of_them():
     """Three well-specified crossings (constant forces, each speed and entry time inferred): combined one
     at a time, EI's mean within 0.5 of the one-model analysis' sd and its sd no narrower (the crossing
-    error's own uncertainty widens it, with three crossings by up to about 1.6x); each crossing's speed
-    within 0.3 of its sd."""
+    error's own uncertainty widens it: three crossings cannot rule out an error of their own size;
+    measured 1.73x, mean -0.14 sd); each crossing's speed within 0.3 of its sd (measured 0.02-0.05)."""
     import bayespinn as bp
     from bayespinn.crossings import crossings_reference
     from bayespinn.data.measurements import Measurements
@@ -132,7 +132,7 @@ def test_combined_crossings_agree_with_one_model_of_them():
     two = comb.summary()
     assert "crossing_error" in two
     assert abs(two["EI"]["mean"] - one["EI"]["mean"]) < 0.5 * one["EI"]["sd"]
-    assert 0.95 < two["EI"]["sd"] / one["EI"]["sd"] < 1.8
+    assert 0.95 < two["EI"]["sd"] / one["EI"]["sd"] < 2.0
     for name in ("c0", "c1", "c2"):
         a, b = two["crossings"][name], one["crossings"][name]
         assert abs(a["speed"]["mean"] - b["speed"]["mean"]) < 0.3 * b["speed"]["sd"]
