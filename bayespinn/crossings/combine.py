@@ -181,11 +181,11 @@ class CombinedPredictor:
 
 def combined_reference(data: Measurements, cfg, *, seed, settings, progress: bool, single):
     """Each crossing of `data` by `single(sub_data, sub_cfg, seed)` (a one-crossing reference), in
-    parallel, then EI combined (module docstring): a `reference.CrossingsReference`."""
+    parallel, then EI combined (module docstring): a `result.CrossingsReference`."""
     from ..executor import Executor, cpu_count
     from .checks import split_crossings
     from .predictor import fit_check_on_rows
-    from .reference import CrossingsReference
+    from .result import CrossingsReference
 
     t_start = time.perf_counter()
     parts = split_crossings(cfg, data)
