@@ -20,7 +20,8 @@ Per crossing: EI mean, sd, ci90, hit (truth inside the 90 % interval), z against
 check's verdict and p, the nuisances' posteriors, runtime. Summary: hits against the binomial 99 %
 acceptance region of a calibrated 90 % interval, the "fits" rate of (a) (target >= 95 %), the "misfit"
 rate of (b) (target >= 90 %), the z distribution. `--joint` analyses the first --joint crossings of
-girder 0 together (speeds and entry times per crossing, EI shared): its sd against one crossing's.
+a girder together (`--joint-girder`, default 0; speeds and entry times per crossing, EI shared): its sd
+against one crossing's.
 
 Records: <out>/crossings/g<G>-c<K>.json (one per crossing, both analyses, with provenance), the study
 <out>/crossings/study.json, the page <out>/crossings.md. Resumable: a crossing whose record exists with
@@ -461,8 +462,8 @@ def write_study(out: Path, args, argv, key: str, planned: int) -> dict:
         "exeter_check": old.get("exeter_check"),
         "runs": [*old.get("runs", []), provenance(argv, args.seed)][-10:],
     }
-    if old.get("joint"):
-        doc["joint"] = joint_ratio(old["joint"], doc["records"])
+    for k in sorted(k for k in old if k.startswith("joint") and old[k]):
+        doc[k] = joint_ratio(old[k], doc["records"])
     doc["summary"] = summary(doc, max(planned, old.get("summary", {}).get("planned", 0)))
     c.write_json(path, {k: v for k, v in doc.items() if k != "records"} | {"records": [
         {"id": f"g{r['girder']}-c{r['crossing']}", **{k: r.get("provenance", {}).get(k) for k in (
@@ -471,15 +472,22 @@ def write_study(out: Path, args, argv, key: str, planned: int) -> dict:
     return doc
 
 
+def joint_key(g: int) -> str:
+    """study.json's key of girder g's joint analysis ("joint" for girder 0, as before)."""
+    return "joint" if g == 0 else f"joint_g{g}"
+
+
 def run_joint(args, argv) -> dict:
-    """The first `args.joint` crossings of girder 0 in one analysis (declared), against one crossing's sd."""
+    """The first `args.joint` crossings of girder `args.joint_girder` in one analysis (declared), against
+    one crossing's sd."""
     from bayespinn.config import Crossing
     from bayespinn.data.measurements import Measurements
 
-    gcfg = girder_for(args, 0)
+    g = args.joint_girder
+    gcfg = girder_for(args, g)
     parts, tables = [], []
     for k in range(args.joint):
-        d = draw(args.seed, 0, k)
+        d = draw(args.seed, g, k)
         data = simulate(truth_config(gcfg, d), args.snr, d["data_seed"], args.smoke)
         parts.append(dataclasses.replace(data, crossing=np.full(len(data), f"c{k}")))
         v = stated_config(gcfg, d, True, args.forces, args.vehicle).vehicle
@@ -489,10 +497,10 @@ def run_joint(args, argv) -> dict:
         for f in ("x", "t", "value", "kind", "y", "sensor", "value_true", "crossing")
     }
     data = Measurements(**cat)
-    cfg = stated_config(gcfg, draw(args.seed, 0, 0), True, args.forces, args.vehicle)
+    cfg = stated_config(gcfg, draw(args.seed, g, 0), True, args.forces, args.vehicle)
     cfg = dataclasses.replace(cfg, crossings=tuple(tables))
     e = analyse(data, cfg, gcfg.beam.EI, args.snr, 0, args.smoke)
-    return {"crossings": args.joint, **e, "provenance": provenance(argv, args.seed)}
+    return {"crossings": args.joint, "girder": g, **e, "provenance": provenance(argv, args.seed)}
 
 
 def joint_ratio(joint: dict, records: list[dict]) -> dict:
@@ -501,7 +509,9 @@ def joint_ratio(joint: dict, records: list[dict]) -> dict:
     one = [
         r["declared"]["EI"]["sd"]
         for r in records
-        if r["girder"] == 0 and r["crossing"] < joint["crossings"] and "declared" in r
+        if r["girder"] == joint.get("girder", 0)
+        and r["crossing"] < joint["crossings"]
+        and "declared" in r
     ]
     med = float(np.median(one)) if one else None
     return {
@@ -675,16 +685,17 @@ def write_page(out: Path, doc: dict) -> None:
                 "(a) speed z, (a) entry z: the declared posterior's mean against the truth, in its sds."
             )
         )
-    j = doc.get("joint")
     blocks.append(Heading("Several crossings in one analysis"))
-    if j:
+    joints = [doc[k] for k in sorted(doc) if k.startswith("joint") and doc[k]]
+    for j in joints:
         blocks.append(
             Paragraph(
-                f"{j['crossings']} crossings of girder 0 together: EI sd {j['EI']['sd']:.4g} "
-                f"against the median of one crossing's over {j.get('one_crossing_n')} of them "
-                f"analysed alone: ratio {_num(j.get('sd_ratio'))} (target <= {SD_RATIO_TARGET}); "
-                "the interval holds the truth: "
-                f"{c.yes_no(j['hit'])}; fit {j['fit_check']['verdict']}; {j['runtime_s']:.0f} s."
+                f"{j['crossings']} crossings of girder {j.get('girder', 0)} together: EI sd "
+                f"{j['EI']['sd']:.4g} against the median of one crossing's over "
+                f"{j.get('one_crossing_n')} of them analysed alone: ratio {_num(j.get('sd_ratio'))} "
+                f"(target <= {SD_RATIO_TARGET}); the interval holds the truth: "
+                f"{c.yes_no(j['hit'])} (z {j['z']:+.2f}); fit {j['fit_check']['verdict']}; "
+                f"{j['runtime_s']:.0f} s."
                 + (
                     f" The crossing-level error's sd (relative): {j['crossing_error']['mean']:.2e} "
                     f"(90 % {j['crossing_error']['ci90'][0]:.2e} to {j['crossing_error']['ci90'][1]:.2e})."
@@ -693,7 +704,7 @@ def write_page(out: Path, doc: dict) -> None:
                 )
             )
         )
-    else:
+    if not joints:
         blocks.append(Paragraph("Not run yet."))
     x = doc.get("exeter_check")
     blocks.append(Heading("Nothing declared: exeter-snr20-seed11 keeps its answer"))
@@ -746,7 +757,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="the declared analysis' vehicle model",
     )  # fmt: skip
     p.add_argument("--only-girder", type=int, default=None, help="run one girder's crossings")
-    p.add_argument("--joint", type=int, default=0, help="analyse this many of girder 0's together")
+    p.add_argument("--joint", type=int, default=0, help="analyse this many of a girder's together")
+    p.add_argument("--joint-girder", type=int, default=0, help="the girder --joint analyses")
     p.add_argument("--exeter-check", action="store_true")
     p.add_argument("--skip-family", action="store_true", help="only --joint / --exeter-check")
     p.add_argument("--resume", action="store_true")
@@ -771,7 +783,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.joint or args.exeter_check:
         doc = json.loads(path.read_text()) if path.is_file() else {}
         if args.joint:
-            doc["joint"] = run_joint(args, argv)
+            doc[joint_key(args.joint_girder)] = run_joint(args, argv)
         if args.exeter_check:
             doc["exeter_check"] = exeter_check()
         doc.update(schema=STUDY_SCHEMA, fingerprint=key)

@@ -427,12 +427,17 @@ def _crossings() -> Section:
             ),
             Entry("nothing declared: within 0.3 record sd", CROSSINGS, "exeter_check.within", ""),
         ]
-    if doc.get("joint"):
+    for key in sorted(k for k in doc if k.startswith("joint") and doc[k]):
+        who = (
+            "joint analysis"
+            if key == "joint"
+            else f"joint analysis, girder {key[len('joint_g') :]}"
+        )
         out += [
-            Entry("joint analysis: crossings", CROSSINGS, "joint.crossings", "d"),
-            Entry("joint analysis: EI sd / one crossing's", CROSSINGS, "joint.sd_ratio", ".2f"),
-            Entry("joint analysis: interval holds the truth", CROSSINGS, "joint.hit", ""),
-            Entry("joint analysis: time [s]", CROSSINGS, "joint.runtime_s", ".0f"),
+            Entry(f"{who}: crossings", CROSSINGS, f"{key}.crossings", "d"),
+            Entry(f"{who}: EI sd / one crossing's", CROSSINGS, f"{key}.sd_ratio", ".2f"),
+            Entry(f"{who}: interval holds the truth", CROSSINGS, f"{key}.hit", ""),
+            Entry(f"{who}: time [s]", CROSSINGS, f"{key}.runtime_s", ".0f"),
         ]
     return Section(
         "Realistic crossings",
