@@ -182,6 +182,8 @@ class CombinedPredictor:
 def combined_reference(data: Measurements, cfg, *, seed, settings, progress: bool, single):
     """Each crossing of `data` by `single(sub_data, sub_cfg, seed)` (a one-crossing reference), in
     parallel, then EI combined (module docstring): a `result.CrossingsReference`."""
+    import multiprocessing as mp
+
     from ..executor import Executor, cpu_count
     from .checks import split_crossings
     from .predictor import fit_check_on_rows
@@ -195,8 +197,6 @@ def combined_reference(data: Measurements, cfg, *, seed, settings, progress: boo
         sub = data.select(np.isin(np.arange(len(data)), rows))
         sub_cfg = dataclasses.replace(cfg, crossings=(tables[name],))
         tasks.append((single, sub, sub_cfg, seeding.child(seed, "emcee", 9400 + j), settings))
-    import multiprocessing as mp
-
     # one process per core; inside a pool's worker (a daemon may not start processes) one at a time
     workers = 1 if mp.current_process().daemon else min(cpu_count(), len(tasks))
     singles = Executor(workers=workers).map(_run_single, tasks, desc="crossings", progress=progress)

@@ -298,10 +298,10 @@ class CrossingsLogPosterior:
         return out
 
     def loglik(self, theta: np.ndarray) -> np.ndarray:
-        """The log-likelihood (constant forces: sigma integrated out, up to a constant), `EVAL_CHUNK`
-        parameter sets at a time."""
+        """The log-likelihood (constant forces: sigma integrated out, up to a constant); with fluctuating
+        forces `EVAL_CHUNK` parameter sets at a time."""
         th = np.atleast_2d(theta)
-        if th.shape[0] > EVAL_CHUNK:
+        if self.forces and th.shape[0] > EVAL_CHUNK:
             return np.concatenate(
                 [self.loglik(th[lo : lo + EVAL_CHUNK]) for lo in range(0, th.shape[0], EVAL_CHUNK)]
             )
