@@ -9,9 +9,10 @@ parameter, the noise sd integrated out and drawn afterwards from its exact inver
 with several crossings each one's speed and entry time by Laplace (`laplace`). With fluctuating forces the
 forces and the resonant terms (`resonance`) are integrated out exactly; the rest is linearised
 (`linearised`: emcee on the hyperparameters, the other parameters from their Gaussian conditional) and,
-where that fails its importance check, the exact posterior is importance-sampled (`importance`). EI,
-damping, noise and the force law are shared by all crossings; speed, entry time and suspension are each
-crossing's own.
+where that fails its importance check, the exact posterior is importance-sampled (`importance`). With
+constant forces, EI, damping and noise are shared by all crossings; speed, entry time and suspension are
+each crossing's own. Several crossings with fluctuating forces are analysed one at a time and EI combined
+with a crossing-level error (`combine`).
 """
 
 from __future__ import annotations
