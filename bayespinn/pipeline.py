@@ -95,6 +95,11 @@ def true_values_of(cfg: Config, seed) -> dict:
     equivalent), and for the analysis model's extra parameters EI_segments (per analysis segment),
     rotational_stiffness [left, right] and load_factor."""
     out: dict = {"EI": cfg.beam.EI}
+    if cfg.model.EI_field == "smooth":
+        from .data.girder_data import field_truth
+        from .uq.girder_field import field_grid
+
+        out.update(field_truth(cfg, field_grid(cfg.beam.length)))
     if cfg.ideal and cfg.beam.ideal and cfg.vehicle.load_rel_sd == 0:
         return out
     from .data.girder_data import girder_truth

@@ -21,6 +21,7 @@ STREAMS = (
     "coverage",
     "init",
     "pyro-full",
+    "importance",
 )
 
 

@@ -151,7 +151,12 @@ class ModelSpec:
     @property
     def ideal(self) -> bool:
         """Uniform EI, pinned supports, i.i.d. noise: the model every method describes."""
-        return self.EI_segments == 1 and self.supports == "pinned" and self.noise == "iid"
+        return (
+            self.EI_segments == 1
+            and self.supports == "pinned"
+            and self.noise == "iid"
+            and self.EI_field == "segments"
+        )
 
 
 @dataclass(frozen=True)

@@ -28,20 +28,21 @@ def needs_crossings(cfg: Config, data: Measurements | None = None) -> bool:
     )
 
 
-def check_ei_field(cfg: Config) -> None:
-    """`model.EI_field = "smooth"` is not built yet: refused by every method, one line."""
+def check_ei_field(cfg: Config, display: str) -> None:
+    """`model.EI_field = "smooth"` is inferred by the modal reference only: refused for `display`, one
+    line."""
     if cfg.model.EI_field != "segments":
         raise InputError(
             "model.EI_field",
             cfg.model.EI_field,
-            "'segments' (a smooth EI field is not supported yet)",
+            f"'segments' for {display}; --method modal infers a smooth EI field",
         )
 
 
 def refuse_crossings(cfg: Config, data: Measurements | None, display: str) -> None:
     """For a method that takes the crossing as stated (the PINN methods): InputError naming the first key
     that declares something to infer, rather than silently analysing with the stated values."""
-    check_ei_field(cfg)
+    check_ei_field(cfg, display)
     if not needs_crossings(cfg, data):
         return
     why = f"for {display}, which takes the crossing as stated; --method modal infers it"
@@ -84,7 +85,7 @@ def check_crossings(cfg: Config, data: Measurements) -> None:
         raise InputError("model.noise", m.noise, f"'iid' (AR(1) noise is not supported {why})")
     if m.EI_field != "segments":
         raise InputError(
-            "model.EI_field", m.EI_field, f"'segments' (a smooth EI field is not supported {why})"
+            "model.EI_field", m.EI_field, f"'segments' (a smooth EI field is not inferred {why})"
         )
     if cfg.infers_load_factor or any(c.vehicle.load_rel_sd > 0 for c in cfg.crossings):
         raise InputError(

@@ -35,6 +35,18 @@ from .noise import (  # noqa: F401 (re-exported)
 )
 
 
+def field_truth(cfg: Config, x: np.ndarray) -> dict:
+    """The truth of a smooth-field analysis (`[model] EI_field = "smooth"`) of the girder `cfg.beam`
+    describes: `EI` (L / integral dx / EI) and `EI_x` {"x", "EI"}, the true EI at the points x [m] (the
+    summary's `EI_x` points; at a segment edge, the segment to the right)."""
+    b = cfg.beam
+    girder = Girder.from_beam(b, b.segments, b.rotational_stiffness)
+    x = np.asarray(x, float)
+    ei = np.asarray(girder.EI, float)
+    seg = np.clip((x / b.length * ei.size).astype(int), 0, ei.size - 1)
+    return {"EI": equivalent_EI(girder), "EI_x": {"x": x.tolist(), "EI": ei[seg].tolist()}}
+
+
 def equivalent_EI(girder: Girder) -> float:
     """The span-averaged flexibility's equivalent L / integral dx / EI [N m^2] (equal segments:
     the harmonic mean of the segment values)."""

@@ -32,9 +32,28 @@ class ModalMCMC(Method):
     def check(self, data, config) -> None:
         # Method.check refuses AR(1) noise for the PINN methods; with real_girders it checks nothing else,
         # and this reference describes every [model] (its girder posterior carries the AR(1) likelihood)
-        from ..crossings import check_crossings, check_ei_field, needs_crossings
+        from ..crossings import check_crossings, needs_crossings
 
-        check_ei_field(config)
+        if config.model.EI_field == "smooth":
+            from ..errors import InputError
+            from ..uq.girder_field import check_field
+
+            if needs_crossings(config, data):
+                raise InputError(
+                    "model.EI_field",
+                    "smooth",
+                    "'segments' with a speed, entry time, damping or axle forces to infer, or several "
+                    "crossings (the smooth field takes the crossing as stated)",
+                )
+            check_field(config, data)
+            if self.settings.noise_prior != "vague":
+                raise InputError(
+                    "--noise-prior",
+                    self.settings.noise_prior,
+                    "vague for a smooth EI field (its reference integrates sigma out under the vague "
+                    "prior)",
+                )
+            return
         if needs_crossings(
             config, data
         ):  # a speed, entry time, damping or forces to infer, or crossings
@@ -63,9 +82,10 @@ class ModalMCMC(Method):
                 )
 
     def infer(self, data, config, *, seed):
-        """The reference posterior: `crossings.crossings_reference` when the crossing leaves anything
-        uncertain (`crossings.needs_crossings`), else the girder reference for a real girder, else today's
-        modal posterior of (EI, sigma)."""
+        """The reference posterior: `uq.field_reference.field_reference` for a smooth EI field,
+        `crossings.crossings_reference` when the crossing leaves anything uncertain
+        (`crossings.needs_crossings`), else the girder reference for a real girder, else today's modal
+        posterior of (EI, sigma)."""
         from ..uq.modal_mcmc import modal_posterior
         from ..uq.priors import NoisePrior
         from ..uq.sampler import MCMCSettings
@@ -73,6 +93,10 @@ class ModalMCMC(Method):
         s = self.settings
         from ..crossings import crossings_reference, needs_crossings
 
+        if config.model.EI_field == "smooth":
+            from ..uq.field_reference import field_reference
+
+            return field_reference(data, config, seed=seed, progress=self.progress)
         if needs_crossings(config, data):
             return crossings_reference(
                 data,
