@@ -98,6 +98,9 @@ def test_run_writes_the_field_and_the_pinn_methods_refuse_it(dip, tmp_path):
     assert set(entry["local_loss"]) == {"depth", "position", "width"}
     lo, hi = entry["local_loss"]["position"]["ci90"]
     assert lo - 0.5 <= CENTRE <= hi + 0.5
+    run = bp.write_run(res, tmp_path / "run")
+    assert (run / "fig_ei_span.png").exists()
+    assert "local loss" in (run / "report.md").read_text()
     for name in ("ensemble", "bpinn"):
         with pytest.raises(InputError) as e:
             get(name)(profile="smoke").check(data, cfg)

@@ -348,10 +348,27 @@ def _girders(result) -> dict:
 def ei_span_figure(result, cfg: Config, path: Path, rng: np.random.Generator) -> str:
     """EI per segment along the span: posterior mean and 90 % band, the nominal and the truth."""
     gs = {k: g for k, g in _girders(result).items() if g.n_segments > 1}
-    if not gs:
-        raise NotApplicable("no method inferred EI per segment")
+    fields = {
+        k: p.field for k, p in result.posteriors.items() if getattr(p, "field", None) is not None
+    }
+    if not gs and not fields:
+        raise NotApplicable("no method inferred EI along the span")
     fig = _new_figure(7.5, 4.2)
     ax = fig.subplots()
+    for key, f in fields.items():
+        ex = f.EI_x()
+        x, mean, ci = (
+            np.asarray(ex["x"]),
+            np.asarray(ex["mean"]) / 1e9,
+            np.asarray(ex["ci90"]) / 1e9,
+        )
+        ax.plot(x, mean, color=_color(key), lw=1.6, label=f"{name(key)}: mean")
+        ax.fill_between(x, ci[:, 0], ci[:, 1], color=_color(key), alpha=0.25, label="90 % band")
+        ax.axhline(0.9 * f.EI_nominal / 1e9, color="0.4", ls=":", lw=1, label="90 % of nominal")
+        ax.axhline(f.EI_nominal / 1e9, color="0.4", ls="-.", lw=1, label="nominal")
+    t_x = (result.truth or {}).get("EI_x")
+    if fields and t_x:
+        ax.plot(t_x["x"], np.asarray(t_x["EI"]) / 1e9, label="truth", **TRUTH_STYLE)
     for key, g in gs.items():
         e = g.EI_segments.reshape(-1, g.n_segments) / 1e9
         lo, mean, hi = np.quantile(e, 0.05, axis=0), e.mean(0), np.quantile(e, 0.95, axis=0)
@@ -376,8 +393,9 @@ def ei_span_figure(result, cfg: Config, path: Path, rng: np.random.Generator) ->
     ax.legend(fontsize=7, loc="best")
     fig.suptitle(f"EI along the span ({_subtitle(result)})", fontsize=11)
     _save(fig, path)
+    what = "EI(x), a smooth field" if fields else "EI of each equal segment"
     return (
-        "EI of each equal segment: posterior mean (line) and 90 % credible band (shading); dotted: 90 % "
+        f"{what}: posterior mean (line) and 90 % credible band (shading); dotted: 90 % "
         "of the nominal EI, the damage threshold of P(damaged); dashed black: the truth where known."
     )
 

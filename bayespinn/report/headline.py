@@ -76,7 +76,7 @@ def ei_sentence(key: str, m: dict, truth: dict | None) -> str:
     if t is not None:
         inside = e["ci90"][0] <= t <= e["ci90"][1]
         where = f"; the true {_gn(t, d)} lies {'inside' if inside else '**outside**'}"
-    span = "span-equivalent " if m.get("EI_segments") else ""
+    span = "span-equivalent " if m.get("EI_segments") or m.get("EI_x") else ""
     return (
         f"**{span}EI = {_gn(e['mean'], d)} {UNIT}, 90 % interval {_gn(e['ci90'][0], d)} to "
         f"{_gn(e['ci90'][1], d)} {UNIT}**, by the {lower(name(key))}{where}."
@@ -101,6 +101,26 @@ def segments_sentence(m: dict) -> str | None:
             f"[{_gn(s['ci90'][0], d)}, {_gn(s['ci90'][1], d)}]{flag}"
         )
     return f"EI per segment ({UNIT}, 90 % interval): " + "; ".join(parts) + "."
+
+
+def loss_sentence(m: dict) -> str | None:
+    """The smooth field's local loss: depth, position and width with their 90 % intervals, and where the
+    field is likely damaged."""
+    loss, ex = m.get("local_loss"), m.get("EI_x")
+    if not loss or not ex:
+        return None
+    d, p, w = loss["depth"], loss["position"], loss["width"]
+    x = [xi for xi, pd in zip(ex["x"], ex["p_damaged"], strict=True) if pd >= 0.9]
+    where = (
+        f"; **likely damaged** (P > 0.9 that EI is below 90 % of nominal) from {x[0]:.1f} to {x[-1]:.1f} m"
+        if x
+        else ""
+    )
+    return (
+        f"a local loss {100 * d['median']:.0f} % deep [{100 * d['ci90'][0]:.0f}, {100 * d['ci90'][1]:.0f}] "
+        f"at {p['median']:.2f} m [{p['ci90'][0]:.2f}, {p['ci90'][1]:.2f}], width (sd) {w['median']:.2f} m "
+        f"[{w['ci90'][0]:.2f}, {w['ci90'][1]:.2f}] (medians, 90 % intervals){where}."
+    )
 
 
 def _fit(methods: dict, key: str) -> tuple[str | None, dict]:
@@ -204,7 +224,7 @@ def answer(result, advise=None) -> Answer:
         fit_extra = explained
     else:
         lead = ei
-    seg = segments_sentence(m)
+    seg = segments_sentence(m) or loss_sentence(m)
     if seg:
         items.append(("Along the span", seg))
     if m.get("identified") is False:
