@@ -80,6 +80,8 @@ GIRDERS = (
     ("damaged-girder", "deflection", "30", 100),
     ("damaged-girder", "strain", "30", 100),
     ("uncertain-load", "deflection", "40", 100),
+    ("smooth-loss", "deflection", "30", 20),
+    ("smooth-loss", "strain", "30", 10),
 )
 #: the fit-check studies: (config or None for the Exeter preset, case, SNR levels, replicates, expect)
 FITCHECK = (
