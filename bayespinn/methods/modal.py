@@ -33,9 +33,9 @@ class ModalMCMC(Method):
         # Method.check refuses AR(1) noise for the PINN methods; with real_girders it checks nothing else,
         # and this reference describes every [model] (its girder posterior carries the AR(1) likelihood)
         from ..crossings import check_crossings, needs_crossings
+        from ..errors import InputError
 
         if config.model.EI_field == "smooth":
-            from ..errors import InputError
             from ..uq.girder_field import check_field
 
             if needs_crossings(config, data):
@@ -46,40 +46,29 @@ class ModalMCMC(Method):
                     "crossings (the smooth field takes the crossing as stated)",
                 )
             check_field(config, data)
-            if self.settings.noise_prior != "vague":
-                raise InputError(
-                    "--noise-prior",
-                    self.settings.noise_prior,
-                    "vague for a smooth EI field (its reference integrates sigma out under the vague "
-                    "prior)",
-                )
-            return
-        if needs_crossings(
-            config, data
-        ):  # a speed, entry time, damping or forces to infer, or crossings
-            from ..errors import InputError
-
+            self._vague_only("a smooth EI field")
+        elif needs_crossings(config, data):  # a speed, entry time, damping or forces, or crossings
             check_crossings(config, data)
-            if self.settings.noise_prior != "vague":
-                raise InputError(
-                    "--noise-prior",
-                    self.settings.noise_prior,
-                    "vague for a crossing with a speed, entry time, damping or axle forces to infer, or "
-                    "several crossings (its reference integrates sigma out under the vague prior)",
-                )
-            return
-        if not config.ideal:
-            from ..errors import InputError
+            self._vague_only(
+                "a crossing with a speed, entry time, damping or axle forces to infer, or several crossings"
+            )
+        elif not config.ideal:
             from ..uq.girder_reference import check_segments
 
             check_segments(config, data)
-            if self.settings.noise_prior != "vague":
-                raise InputError(
-                    "--noise-prior",
-                    self.settings.noise_prior,
-                    "vague for a girder with EI per segment, springs or an uncertain load (its "
-                    "reference integrates sigma out under the vague prior)",
-                )
+            self._vague_only("a girder with EI per segment, springs or an uncertain load")
+
+    def _vague_only(self, what: str) -> None:
+        """Refuse --noise-prior other than vague for `what`: its reference integrates sigma out under the
+        vague prior."""
+        if self.settings.noise_prior != "vague":
+            from ..errors import InputError
+
+            raise InputError(
+                "--noise-prior",
+                self.settings.noise_prior,
+                f"vague for {what} (its reference integrates sigma out under the vague prior)",
+            )
 
     def infer(self, data, config, *, seed):
         """The reference posterior: `uq.field_reference.field_reference` for a smooth EI field,
