@@ -42,9 +42,7 @@ def field_truth(cfg: Config, x: np.ndarray) -> dict:
     b = cfg.beam
     girder = Girder.from_beam(b, b.segments, b.rotational_stiffness)
     x = np.asarray(x, float)
-    ei = np.asarray(girder.EI, float)
-    seg = np.clip((x / b.length * ei.size).astype(int), 0, ei.size - 1)
-    return {"EI": equivalent_EI(girder), "EI_x": {"x": x.tolist(), "EI": ei[seg].tolist()}}
+    return {"EI": equivalent_EI(girder), "EI_x": {"x": x.tolist(), "EI": girder.ei_at(x).tolist()}}
 
 
 def equivalent_EI(girder: Girder) -> float:

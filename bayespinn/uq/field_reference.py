@@ -50,15 +50,8 @@ class FieldPredictor:
 
     def __init__(self, cfg: Config, post: FieldPosterior):
         self.cfg, self.post = cfg, post
-        b = cfg.beam
         mean_ei = post.loss.EI_pieces(post.theta).mean(0)
-        self.template = Girder(
-            b.length,
-            tuple(float(e) for e in mean_ei),
-            b.mass_per_length,
-            b.section_depth,
-            b.damping_ratio,
-        )
+        self.template = Girder.from_beam(cfg.beam, tuple(float(e) for e in mean_ei))
 
     def __call__(
         self, x, t, quantity: str = "deflection", n_draws: int = 200, rng=None

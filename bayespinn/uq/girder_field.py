@@ -200,7 +200,7 @@ def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
     a_u, a_xx = data.weights
 
     def girder_at(level):
-        return Girder(L, (level,) * PIECES, b.mass_per_length, b.section_depth, b.damping_ratio)
+        return Girder.from_beam(b, (level,) * PIECES)
 
     def model_for(n_modes, girder):
         return GirderModalModel(girder, cfg.vehicle, data.x, data.t, a_u, a_xx, n_modes=n_modes)
