@@ -23,8 +23,10 @@ EI(x) over the piece (exact FE statics, modal dynamics with the girder reference
 the level-only fit).
 
 Inference. The position makes the posterior multimodal (a loss can explain the data from more than one
-place), so a Levenberg-Marquardt MAP search starts from `STARTS` positions along the span; distinct
-modes within `MODE_CUTOFF` of the best Laplace evidence each get a multivariate t proposal (`T_DOF`)
+place, and gauges see EI only near where they sit), so the MAP search is global: a grid over
+(position, width, depth) with the level profiled out, whose local maxima (at most `STARTS`) start
+Levenberg-Marquardt runs (from starts along the span alone, the search missed the best mode by hundreds
+of nats on gauge data, even on data from the surrogate itself); distinct modes within `MODE_CUTOFF` of the best Laplace evidence each get a multivariate t proposal (`T_DOF`)
 from their Laplace fit, and adaptive multiple importance sampling refines them (at least `AMIS_ROUNDS`;
 deterministic-mixture weights over every proposal; rounds continue until the effective sample size
 reaches `sampler.ESS_MIN`, at most `AMIS_MAX_ROUNDS`). The draws are resampled to `N_DRAWS`.
@@ -37,6 +39,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -59,7 +62,11 @@ from .sampler import ESS_MIN
 #: average
 PIECES = 48
 SUB = 8
-#: starting positions of the MAP search, equally spaced in prior probability along the span
+#: the MAP search's global grid, points equally spaced in prior probability: positions along the span
+#: (one per piece), widths and depths; at most STARTS of the grid's local maxima start the search
+GRID_POSITIONS = PIECES
+GRID_WIDTHS = 8
+GRID_DEPTHS = 8
 STARTS = 16
 #: modes whose Laplace evidence is below this fraction of the best are not sampled
 MODE_CUTOFF = 1e-4
@@ -189,14 +196,35 @@ def field_posterior(
     return one_blas_thread(_field_posterior)(data, cfg, seed, progress, t0)
 
 
-def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
+@dataclass
+class _Problem:
+    """The smooth field's posterior on one dataset: `residuals(theta)` gives the residuals (W, n) and
+    log N(theta; 0, I) - (n/2) log RSS (W,) per row of theta (-inf outside the support or where the
+    surrogate fails); `a0` the level-only fit's theta[0]; `n_modes` the surrogate's mode count; `evals`
+    the surrogate evaluations spent setting it up."""
+
+    loss: LocalLoss
+    y: np.ndarray
+    residuals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    n: int
+    a0: float
+    n_modes: int
+    evals: int
+
+    def log_target(self, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """log p (W,) and RSS (W,) per row of theta."""
+        r, lp = self.residuals(th)
+        return lp, np.where(np.isfinite(lp), np.einsum("wp,wp->w", r, r), np.inf)
+
+
+def _problem(data: Measurements, cfg: Config) -> _Problem:
+    """Set up the smooth field's posterior for `data` (see `_Problem`)."""
     b = cfg.beam
     prior = EIPrior.from_spec(cfg.prior)
     m, sd = prior.loc, prior.log_sd
-    L = b.length
     y = np.asarray(data.value, float)
     n = y.size
-    loss = LocalLoss(L, m, sd)
+    loss = LocalLoss(b.length, m, sd)
     a_u, a_xx = data.weights
 
     def girder_at(level):
@@ -216,8 +244,6 @@ def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
     model = model_for(n_modes, girder_at(math.exp(level)))
 
     def residuals(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals (W, n) and log N(theta; 0, I) - (n/2) log RSS (W,) per row of theta; -inf outside
-        the support or where the surrogate fails."""
         th = np.atleast_2d(th)
         r = np.full((len(th), n), np.nan)
         ok = np.flatnonzero(np.all(np.abs(th) < SUPPORT_SD, axis=1))
@@ -231,18 +257,19 @@ def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
             lp = np.where(good, -0.5 * np.sum(th**2, 1) - 0.5 * n * np.log(rss), -np.inf)
         return r, lp
 
-    def log_target(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r, lp = residuals(th)
-        return lp, np.where(np.isfinite(lp), np.einsum("wp,wp->w", r, r), np.inf)
+    return _Problem(loss, y, residuals, n, (level - m) / sd, n_modes, len(scan))
 
+
+def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
+    prob = _problem(data, cfg)
+    loss, residuals, log_target, n = prob.loss, prob.residuals, prob.log_target, prob.n
+    n_modes, a0, evals = prob.n_modes, prob.a0, prob.evals
     rng = seeding.rng(seed, "importance")
-    evals = len(scan)
-    a0 = (level - m) / sd
-    starts = [
-        np.array([a0, -1.0, float(u), 0.0]) for u in ndtri((np.arange(STARTS) + 0.5) / STARTS)
-    ]
+    bar = _progress(progress, 1 + STARTS + AMIS_MAX_ROUNDS, "smooth field")
+    starts, k = _grid_starts(residuals, prob.y, a0, loss.sd)
+    evals += k
+    bar.update(1)
     modes = []
-    bar = _progress(progress, STARTS + AMIS_MAX_ROUNDS, "smooth field")
     for th0 in starts:
         th, lp_map, H, k = _lm_map(residuals, n, th0)
         evals += k
@@ -275,6 +302,49 @@ def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
         diagnostics=diagnostics,
         runtime_s=time.perf_counter() - t0,
     )
+
+
+def _grid_starts(residuals, y: np.ndarray, a0: float, sd: float) -> tuple[list[np.ndarray], int]:
+    """Starting points of the MAP search from a global grid: `GRID_POSITIONS` x `GRID_WIDTHS` x
+    `GRID_DEPTHS` points in (position, width, depth), each equally spaced in prior probability, the level
+    profiled out around the level-only fit a0 (sd: the level's prior sd in log EI); each (position, width) cell keeps its best depth, and the cells that beat their
+    eight neighbours, best first, are the starts (at most `STARTS`). Returns them and the number of
+    surrogate evaluations."""
+    u = [ndtri((np.arange(k) + 0.5) / k) for k in (GRID_DEPTHS, GRID_POSITIONS, GRID_WIDTHS)]
+    ud, up, uw = np.meshgrid(*u, indexing="ij")  # (depth, position, width)
+    th = np.stack([np.full(ud.size, a0), ud.ravel(), up.ravel(), uw.ravel()], axis=1)
+    r, _ = residuals(th)
+    # the level profiled out as a scale of the response (exact for the static part, where the response
+    # is proportional to 1 / level): prediction p = y - r scaled by c = p.y / p.p, level shifted by
+    # -log(c) / sd
+    p = y[None] - r
+    with np.errstate(all="ignore"):
+        c = np.clip((p @ y) / np.einsum("wp,wp->w", p, p), 1e-3, 1e3)
+        a = a0 - np.log(c) / sd
+        rss = np.einsum("wp,wp->w", y[None] - c[:, None] * p, y[None] - c[:, None] * p)
+        lp = -0.5 * (a**2 + np.sum(th[:, 1:] ** 2, 1)) - 0.5 * y.size * np.log(rss)
+    lp = np.where(np.isfinite(lp) & (np.abs(a) < SUPPORT_SD), lp, -np.inf).reshape(ud.shape)
+    a = a.reshape(ud.shape)
+    best_d = np.argmax(lp, axis=0)  # (position, width)
+    cell = np.max(lp, axis=0)
+    padded = np.pad(cell, 1, constant_values=-np.inf)
+    P, W = cell.shape
+    neighbours = np.stack(
+        [
+            padded[1 + i : 1 + i + P, 1 + j : 1 + j + W]
+            for i in (-1, 0, 1)
+            for j in (-1, 0, 1)
+            if (i, j) != (0, 0)
+        ]
+    )
+    peak = np.isfinite(cell) & np.all(cell >= neighbours, axis=0)
+    order = [int(q) for q in np.argsort(-np.where(peak, cell, -np.inf), axis=None) if peak.flat[q]]
+    starts = []
+    for q in order[:STARTS]:
+        ip, iw = np.unravel_index(q, cell.shape)
+        id_ = best_d[ip, iw]
+        starts.append(np.array([a[id_, ip, iw], u[0][id_], u[1][ip], u[2][iw]]))
+    return starts, th.shape[0]
 
 
 def _lm_map(residuals, n: int, theta0: np.ndarray, max_iter: int = 60):
