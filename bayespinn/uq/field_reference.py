@@ -14,6 +14,7 @@ from ..data.measurements import Measurements
 from ..methods.reference import REFERENCE_KEY
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
+from ..physics.hermite import element_of
 from ..physics.loads import quantity_weights
 from .girder_field import PIECES, FieldPosterior, field_posterior
 from .posterior import Posterior, summarise
@@ -68,11 +69,16 @@ class FieldPredictor:
             *quantity_weights(quantity),
             n_modes=PREDICT_MODES,
         )
-        ei = p.loss.EI_pieces(p.theta[pick])
+        th = p.theta[pick]
+        ei = p.loss.EI_pieces(th)
         out = m.predict(ei)
-        if quantity == "moment":
-            seg = np.clip((x / self.cfg.beam.length * PIECES).astype(int), 0, PIECES - 1)
-            out = -ei[:, seg] * out
+        if quantity in ("moment", "curvature"):
+            # the surrogate's moment is its curvature times its piece's EI; the field's curvature is
+            # that moment over the field's own EI at x (as the posterior's likelihood reads a gauge)
+            piece = element_of(x, m.h, m.n_elements)[0] // (m.n_elements // PIECES)
+            out = -ei[:, piece] * out
+            if quantity == "curvature":
+                out = -out / p.loss.EI_at(th, x)
         return out
 
 

@@ -51,6 +51,7 @@ from ..data.measurements import Measurements
 from ..errors import InputError
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
+from ..physics.hermite import element_of
 from ..threads import one_blas_thread
 from .girder_map import MODE_STEPS
 from .girder_posterior import DAMAGE_FRACTION
@@ -125,6 +126,17 @@ class LocalLoss:
         g = np.exp(-0.5 * ((x - p["position"][:, None]) / p["width"][:, None]) ** 2)
         return p["level"][:, None] * (1.0 - p["depth"][:, None] * g)
 
+    def curvature_factor(
+        self, theta: np.ndarray, EI_pieces: np.ndarray, x: np.ndarray, piece: np.ndarray
+    ):
+        """(W, len(x)): the factor EI_piece / EI(x) that turns the surrogate's curvature at x (where the
+        piece `piece` holds EI_pieces) into the field's, M / EI(x). The bending moment is what the
+        surrogate gets right (statically determined on pinned supports); the curvature at a gauge is the
+        moment over the EI at the gauge itself, not over its piece's average (on the loss's flank the two
+        differ by several per cent over one piece)."""
+        ux, inv = np.unique(np.asarray(x, float), return_inverse=True)
+        return EI_pieces[:, piece] / self.EI_at(theta, ux)[:, inv.ravel()]
+
     def EI_pieces(self, theta: np.ndarray) -> np.ndarray:
         """Each piece's compliance-averaged EI, (W, PIECES)."""
         x = (np.arange(PIECES * SUB) + 0.5) * self.length / (PIECES * SUB)
@@ -198,13 +210,16 @@ def field_posterior(
 
 @dataclass
 class _Problem:
-    """The smooth field's posterior on one dataset: `residuals(theta)` gives the residuals (W, n) and
+    """The smooth field's posterior on one dataset: `predict(theta)` the surrogate's noise-free
+    response (W, n) at the data's points per row of theta (strain rows at the field's own EI at the gauge);
+    `residuals(theta)` gives the residuals (W, n) and
     log N(theta; 0, I) - (n/2) log RSS (W,) per row of theta (-inf outside the support or where the
     surrogate fails); `a0` the level-only fit's theta[0]; `n_modes` the surrogate's mode count; `evals`
     the surrogate evaluations spent setting it up."""
 
     loss: LocalLoss
     y: np.ndarray
+    predict: Callable[[np.ndarray], np.ndarray]
     residuals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     n: int
     a0: float
@@ -243,6 +258,18 @@ def _problem(data: Measurements, cfg: Config) -> _Problem:
     n_modes = _mode_count(model_for, girder_at(math.exp(level)), level, sigma_hat, y)
     model = model_for(n_modes, girder_at(math.exp(level)))
 
+    # curvature rows (strain gauges): their piece in the surrogate's mesh, for `curvature_factor`
+    curv = np.flatnonzero((np.asarray(a_u) == 0) & (np.asarray(a_xx) != 0))
+    x_c = np.asarray(data.x, float)[curv]
+    piece_c = element_of(x_c, model.h, model.n_elements)[0] // (model.n_elements // PIECES)
+
+    def predict(th: np.ndarray) -> np.ndarray:
+        ei = loss.EI_pieces(th)
+        pred = model.predict(ei)
+        if curv.size:
+            pred[:, curv] *= loss.curvature_factor(th, ei, x_c, piece_c)
+        return pred
+
     def residuals(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         th = np.atleast_2d(th)
         r = np.full((len(th), n), np.nan)
@@ -250,14 +277,14 @@ def _problem(data: Measurements, cfg: Config) -> _Problem:
         for i in range(0, ok.size, 256):
             rows = ok[i : i + 256]
             with np.errstate(all="ignore"):
-                r[rows] = y[None] - model.predict(loss.EI_pieces(th[rows]))
+                r[rows] = y[None] - predict(th[rows])
         rss = np.einsum("wp,wp->w", r, r)
         good = np.isfinite(rss) & (rss > 0)
         with np.errstate(all="ignore"):
             lp = np.where(good, -0.5 * np.sum(th**2, 1) - 0.5 * n * np.log(rss), -np.inf)
         return r, lp
 
-    return _Problem(loss, y, residuals, n, (level - m) / sd, n_modes, len(scan))
+    return _Problem(loss, y, predict, residuals, n, (level - m) / sd, n_modes, len(scan))
 
 
 def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
