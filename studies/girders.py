@@ -108,6 +108,7 @@ def replicate(cfg, snr: float | None, seed: int, i: int, opts) -> dict:
         "EI_sd": m["EI"]["sd"],
         "rhat": m.get("diagnostics", {}).get("rhat"),
         "converged": m.get("diagnostics", {}).get("converged"),
+        "fit_check": (m.get("fit_check") or {}).get("verdict"),
         "time_s": time.perf_counter() - t0,
         **field,
         **c.replicate_provenance(),
@@ -141,6 +142,10 @@ def summarise(doc: dict) -> dict:
         "p_damaged_median": np.median(pd, axis=0).tolist() if pd.size else None,
         "p_damaged_min": pd.min(axis=0).tolist() if pd.size else None,
         "converged": int(sum(bool(r.get("converged")) for r in recs)),
+        # the modal reference's fit check per replicate (recorded since the smooth field's strain study)
+        "fit_check": {
+            v: int(sum(r.get("fit_check") == v for r in recs)) for v in ("fits", "misfit")
+        },
         "median_time_s": float(np.median([r["time_s"] for r in recs])) if recs else None,
         **field_rows(recs),
     }

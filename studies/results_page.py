@@ -280,6 +280,7 @@ def _girders() -> Section:
                 "summary.field.offset_median_m",
                 ".2f",
             ),
+            Entry(f"{study}: fit check said fits", rec, "summary.fit_check.fits", "d"),
             Entry(f"{study}: median time per dataset [s]", rec, "summary.median_time_s", ".0f"),
         ]
     rec = "reports/paper/girder_pinns/damaged-girder-deflection-snr30.json"
