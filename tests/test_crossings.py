@@ -274,13 +274,3 @@ def test_pinn_methods_refuse_what_they_would_ignore(name, toml, key):
     with pytest.raises(InputError) as e:
         method.check(data, cfg)
     assert str(e.value).startswith(key) and "\n" not in str(e.value)
-
-
-@pytest.mark.parametrize("name", ["ensemble", "bpinn"])
-def test_smooth_ei_field_is_refused_by_the_pinn_methods(name):
-    from bayespinn.methods import get
-
-    cfg = bp.resolve("deflection", {"model": {"EI_field": "smooth"}})
-    with pytest.raises(InputError) as e:
-        get(name)(profile="smoke").check(sample_layout(cfg, 0), cfg)
-    assert str(e.value).startswith("model.EI_field") and "--method modal" in str(e.value)

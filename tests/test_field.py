@@ -21,13 +21,15 @@ import bayespinn as bp
 from bayespinn.errors import InputError
 from bayespinn.methods import get
 from bayespinn.pipeline import true_values_of
+from bayespinn.threads import one_blas_thread
 from bayespinn.uq import girder_field
 from bayespinn.uq.girder_field import field_grid, field_posterior
 
 EI0 = 1.03361e9
 DEPTH, CENTRE, FWHM = 0.3, 6.1, 1.5
-#: the gauge dataset on which the search along the span alone misses the best mode
-SEARCH_SEED = 1
+#: the gauge dataset of the search test (one BLAS thread; on seeds 1-7 of data from the surrogate the
+#: grid reached the truth's mode on 6, 7 nats short on seed 5; starts along the span alone on 2)
+SEARCH_SEED = 2
 
 
 def loss_profile(length: float, centre: float = CENTRE, n: int = 96) -> list[float]:
@@ -92,7 +94,7 @@ def test_the_checks_fail_for_a_loss_elsewhere_and_for_a_uniform_model(dip):
     assert np.mean((t >= lo) & (t <= hi)) < 0.9
 
 
-def test_run_writes_the_field_and_the_pinn_methods_refuse_it(dip, tmp_path):
+def test_run_writes_the_field_and_the_pinn_methods_take_it(dip, tmp_path):
     cfg, data, _ = dip
     truth = true_values_of(cfg, 1)
     res = bp.analyse(data, cfg, methods="modal", seed=1, profile="smoke", snr_db=30, truth=truth)
@@ -107,11 +109,35 @@ def test_run_writes_the_field_and_the_pinn_methods_refuse_it(dip, tmp_path):
     run = bp.write_run(res, tmp_path / "run")
     assert (run / "fig_ei_span.png").exists()
     assert "local loss" in (run / "report.md").read_text()
+    # the PINN methods take the field (what its reference does not describe, they refuse alike)
+    ar1 = config(noise="ar1")
     for name in ("ensemble", "bpinn"):
+        get(name)(profile="smoke").check(data, cfg)
         with pytest.raises(InputError) as e:
-            get(name)(profile="smoke").check(data, cfg)
-        msg = str(e.value)
-        assert msg.startswith("model.EI_field") and "--method modal" in msg and "\n" not in msg
+            get(name)(profile="smoke").check(data, ar1)
+        assert str(e.value).startswith("model.noise") and "\n" not in str(e.value)
+
+
+def test_the_pinn_reads_the_field_as_the_reference_does():
+    """The girder PINN's field (torch, differentiable) is the reference's map from theta to each piece's
+    EI, and its enrichment the reference's surrogate; its problem starts at the reference's MAP search."""
+    import torch
+
+    from bayespinn.uq.field_pinn import FieldGirderProblem
+
+    cfg = strain_config()
+    data = bp.simulate(cfg, snr_db=30, seed=SEARCH_SEED)
+    pr = FieldGirderProblem(data, cfg)
+    th = np.random.default_rng(0).standard_normal((5, 4))
+    assert np.allclose(pr.ei_pieces(torch.as_tensor(th)).numpy(), pr.loss.EI_pieces(th), rtol=1e-12)
+    theta, left, right, lam = pr.coefficients(torch.as_tensor(th))
+    assert theta.shape == (5, girder_field.PIECES) and torch.all(lam == 1)
+    assert np.allclose(pr.enrichment(th), pr.field.predict(th))
+    # the start is the reference's MAP: from it, Levenberg-Marquardt climbs no further
+    top = pr.field.residuals(pr.phi0[None])[1][0]
+    assert girder_field._lm_map(pr.field.residuals, pr.field.n, pr.phi0)[1] <= top + 1e-3
+    assert pr.inside(pr.phi0) and not pr.inside(np.array([0.0, 0.0, 9.0, 0.0]))
+    assert np.isclose(float(pr.log_prior(torch.as_tensor(th[0]))), -0.5 * np.sum(th[0] ** 2))
 
 
 @pytest.mark.parametrize(
@@ -193,6 +219,7 @@ def test_a_gauge_reads_the_moment_over_the_local_EI():
             assert abs(np.median(own) - 1.0) > 0.02
 
 
+@one_blas_thread  # as the reference runs it: the climbs' last bits then do not depend on the machine
 def test_the_global_search_reaches_the_best_mode_on_gauge_data():
     """Strain data made by the surrogate itself at the true loss (30 dB): the global search's starts
     climb to the mode the truth climbs to. Negative control: sixteen starts along the span at one depth
@@ -214,3 +241,26 @@ def test_the_global_search_reaches_the_best_mode_on_gauge_data():
     assert best(starts) >= top - 1.0
     along = [np.array([own.a0, -1.0, u, 0.0]) for u in ndtri((np.arange(16) + 0.5) / 16)]
     assert best(along) < top - 50.0
+
+
+@pytest.mark.slow
+def test_the_pinn_methods_find_the_loss_beside_the_reference(dip):
+    """The deep ensemble (smoke profile, two members) on the deflection dataset: the 90 % band of EI(x)
+    holds the true EI(x) over at least 90 % of the span, the deepest point of the posterior mean lies
+    within 1 m of the truth's, and the span-equivalent EI sits within one reference sd of the reference's.
+    Negative control: the same band judged against the loss moved by 3 m misses it. (The B-PINN runs the
+    same problem; its NUTS chains take about 20 minutes at the fast profile, so it is measured by the
+    study command in docs/methods.md, not here.)"""
+    cfg, data, _ = dip
+    truth = true_EI_x(cfg)
+    moved = true_EI_x(config(CENTRE + 3.0))
+    ref = bp.analyse(data, cfg, methods="modal", seed=1, profile="smoke").posteriors
+    ref = next(iter(ref.values()))
+    for method in (get("ensemble")(profile="smoke", members=2),):
+        post = next(iter(bp.analyse(data, cfg, methods=[method], seed=1).posteriors.values()))
+        ex = post.field.EI_x(truth)
+        x, mean = np.asarray(ex["x"]), np.asarray(ex["mean"])
+        assert ex["coverage"] >= 0.9, (method.name, ex["coverage"])
+        assert abs(x[np.argmin(mean)] - CENTRE) <= 1.0
+        assert abs(np.mean(post.EI) - np.mean(ref.EI)) <= np.std(ref.EI)
+        assert post.field.EI_x(moved)["coverage"] < 0.9

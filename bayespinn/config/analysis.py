@@ -202,11 +202,16 @@ class Config:
 
     @property
     def real_girder(self) -> bool:
-        """Whether the analysis model is a real girder: EI per segment, springs at the supports or an
-        inferred load factor (whatever the noise model). The PINN methods then fit the girder network
-        (`uq.girder_pinn`) rather than the uniform, pinned one."""
+        """Whether the analysis model is a real girder: EI per segment or a smooth EI field, springs at the
+        supports or an inferred load factor (whatever the noise model). The PINN methods then fit the
+        girder network (`uq.girder_pinn`) rather than the uniform, pinned one."""
         m = self.model
-        return m.EI_segments > 1 or m.supports != "pinned" or self.infers_load_factor
+        return (
+            m.EI_segments > 1
+            or m.EI_field == "smooth"
+            or m.supports != "pinned"
+            or self.infers_load_factor
+        )
 
     @property
     def ideal(self) -> bool:

@@ -4,7 +4,6 @@ uniform pinned girder (`reference.crossings_reference`)."""
 
 from .reference import (
     check_crossings,
-    check_ei_field,
     crossings_reference,
     needs_crossings,
     refuse_crossings,
@@ -12,7 +11,6 @@ from .reference import (
 
 __all__ = [
     "check_crossings",
-    "check_ei_field",
     "crossings_reference",
     "needs_crossings",
     "refuse_crossings",

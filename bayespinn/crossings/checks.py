@@ -28,21 +28,9 @@ def needs_crossings(cfg: Config, data: Measurements | None = None) -> bool:
     )
 
 
-def check_ei_field(cfg: Config, display: str) -> None:
-    """`model.EI_field = "smooth"` is inferred by the modal reference only: refused for `display`, one
-    line."""
-    if cfg.model.EI_field != "segments":
-        raise InputError(
-            "model.EI_field",
-            cfg.model.EI_field,
-            f"'segments' for {display}; --method modal infers a smooth EI field",
-        )
-
-
 def refuse_crossings(cfg: Config, data: Measurements | None, display: str) -> None:
     """For a method that takes the crossing as stated (the PINN methods): InputError naming the first key
     that declares something to infer, rather than silently analysing with the stated values."""
-    check_ei_field(cfg, display)
     if not needs_crossings(cfg, data):
         return
     why = f"for {display}, which takes the crossing as stated; --method modal infers it"

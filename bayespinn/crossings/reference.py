@@ -36,7 +36,6 @@ from ..uq.sampler import ESS_MIN, RHAT_MAX, MCMCSettings, sample
 from . import peak
 from .checks import (  # noqa: F401  (re-exported: the package's names)
     check_crossings,
-    check_ei_field,
     needs_crossings,
     refuse_crossings,
     split_crossings,

@@ -355,7 +355,7 @@ def ei_span_figure(result, cfg: Config, path: Path, rng: np.random.Generator) ->
         raise NotApplicable("no method inferred EI along the span")
     fig = _new_figure(7.5, 4.2)
     ax = fig.subplots()
-    for key, f in fields.items():
+    for i, (key, f) in enumerate(fields.items()):
         ex = f.EI_x()
         x, mean, ci = (
             np.asarray(ex["x"]),
@@ -364,8 +364,9 @@ def ei_span_figure(result, cfg: Config, path: Path, rng: np.random.Generator) ->
         )
         ax.plot(x, mean, color=_color(key), lw=1.6, label=f"{name(key)}: mean")
         ax.fill_between(x, ci[:, 0], ci[:, 1], color=_color(key), alpha=0.25, label="90 % band")
-        ax.axhline(0.9 * f.EI_nominal / 1e9, color="0.4", ls=":", lw=1, label="90 % of nominal")
-        ax.axhline(f.EI_nominal / 1e9, color="0.4", ls="-.", lw=1, label="nominal")
+        if i == 0:  # one nominal for every method
+            ax.axhline(0.9 * f.EI_nominal / 1e9, color="0.4", ls=":", lw=1, label="90 % of nominal")
+            ax.axhline(f.EI_nominal / 1e9, color="0.4", ls="-.", lw=1, label="nominal")
     t_x = (result.truth or {}).get("EI_x")
     if fields and t_x:
         ax.plot(t_x["x"], np.asarray(t_x["EI"]) / 1e9, label="truth", **TRUTH_STYLE)

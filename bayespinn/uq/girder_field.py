@@ -39,7 +39,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -210,21 +209,48 @@ def field_posterior(
 
 @dataclass
 class _Problem:
-    """The smooth field's posterior on one dataset: `predict(theta)` the surrogate's noise-free
-    response (W, n) at the data's points per row of theta (strain rows at the field's own EI at the gauge);
-    `residuals(theta)` gives the residuals (W, n) and
-    log N(theta; 0, I) - (n/2) log RSS (W,) per row of theta (-inf outside the support or where the
-    surrogate fails); `a0` the level-only fit's theta[0]; `n_modes` the surrogate's mode count; `evals`
-    the surrogate evaluations spent setting it up."""
+    """The smooth field's posterior on one dataset (picklable: a PINN's problem carries it to worker
+    processes). `predict(theta)`: the surrogate's noise-free response (W, n) at the data's points per row
+    of theta, strain rows at the field's own EI at the gauge (`LocalLoss.curvature_factor`);
+    `residuals(theta)`: the residuals (W, n) and log N(theta; 0, I) - (n/2) log RSS (W,) per row of theta
+    (-inf outside the support or where the surrogate fails); `a0` the level-only fit's theta[0];
+    `n_modes` the surrogate's mode count; `evals` the surrogate evaluations spent setting it up."""
 
     loss: LocalLoss
     y: np.ndarray
-    predict: Callable[[np.ndarray], np.ndarray]
-    residuals: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
-    n: int
+    model: GirderModalModel
+    curv: np.ndarray  # the curvature (strain) rows
+    x_c: np.ndarray  # their positions [m]
+    piece_c: np.ndarray  # their piece in the surrogate's mesh
     a0: float
     n_modes: int
     evals: int
+
+    @property
+    def n(self) -> int:
+        return self.y.size
+
+    def predict(self, th: np.ndarray) -> np.ndarray:
+        ei = self.loss.EI_pieces(th)
+        pred = self.model.predict(ei)
+        if self.curv.size:
+            pred[:, self.curv] *= self.loss.curvature_factor(th, ei, self.x_c, self.piece_c)
+        return pred
+
+    def residuals(self, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        th = np.atleast_2d(th)
+        y, n = self.y, self.n
+        r = np.full((len(th), n), np.nan)
+        ok = np.flatnonzero(np.all(np.abs(th) < SUPPORT_SD, axis=1))
+        for i in range(0, ok.size, 256):
+            rows = ok[i : i + 256]
+            with np.errstate(all="ignore"):
+                r[rows] = y[None] - self.predict(th[rows])
+        rss = np.einsum("wp,wp->w", r, r)
+        good = np.isfinite(rss) & (rss > 0)
+        with np.errstate(all="ignore"):
+            lp = np.where(good, -0.5 * np.sum(th**2, 1) - 0.5 * n * np.log(rss), -np.inf)
+        return r, lp
 
     def log_target(self, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """log p (W,) and RSS (W,) per row of theta."""
@@ -257,34 +283,11 @@ def _problem(data: Measurements, cfg: Config) -> _Problem:
     sigma_hat = float(np.sqrt(np.min(rss_scan) / n))
     n_modes = _mode_count(model_for, girder_at(math.exp(level)), level, sigma_hat, y)
     model = model_for(n_modes, girder_at(math.exp(level)))
-
     # curvature rows (strain gauges): their piece in the surrogate's mesh, for `curvature_factor`
     curv = np.flatnonzero((np.asarray(a_u) == 0) & (np.asarray(a_xx) != 0))
     x_c = np.asarray(data.x, float)[curv]
     piece_c = element_of(x_c, model.h, model.n_elements)[0] // (model.n_elements // PIECES)
-
-    def predict(th: np.ndarray) -> np.ndarray:
-        ei = loss.EI_pieces(th)
-        pred = model.predict(ei)
-        if curv.size:
-            pred[:, curv] *= loss.curvature_factor(th, ei, x_c, piece_c)
-        return pred
-
-    def residuals(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        th = np.atleast_2d(th)
-        r = np.full((len(th), n), np.nan)
-        ok = np.flatnonzero(np.all(np.abs(th) < SUPPORT_SD, axis=1))
-        for i in range(0, ok.size, 256):
-            rows = ok[i : i + 256]
-            with np.errstate(all="ignore"):
-                r[rows] = y[None] - predict(th[rows])
-        rss = np.einsum("wp,wp->w", r, r)
-        good = np.isfinite(rss) & (rss > 0)
-        with np.errstate(all="ignore"):
-            lp = np.where(good, -0.5 * np.sum(th**2, 1) - 0.5 * n * np.log(rss), -np.inf)
-        return r, lp
-
-    return _Problem(loss, y, predict, residuals, n, (level - m) / sd, n_modes, len(scan))
+    return _Problem(loss, y, model, curv, x_c, piece_c, (level - m) / sd, n_modes, len(scan))
 
 
 def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:

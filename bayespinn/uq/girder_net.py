@@ -86,6 +86,8 @@ class Pieces:
     mm: torch.Tensor  # (2, 2, 2, D, D)  per end: [w_xixi, w_xi]' [w_xixi, w_xi]
     ic: torch.Tensor  # (D, D)  initial value and rate
     counts: dict
+    #: KK (1, 1, D, D) and Kf (1, D) hold the PDE rows combined at one phi (`pieces`' `at`)
+    collapsed: bool = False
 
 
 def features(net: PINN, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int):
@@ -93,8 +95,12 @@ def features(net: PINN, xi: torch.Tensor, tau: torch.Tensor, kx: int, kt: int):
     return j.map(lambda c: c[0])
 
 
-def pieces(problem: GirderProblem, net: PINN, pts: Points, y: np.ndarray) -> Pieces:
-    """Gram pieces of `net`'s features at the data and `pts` (float64; with gradients if the net has)."""
+def pieces(
+    problem: GirderProblem, net: PINN, pts: Points, y: np.ndarray, at: torch.Tensor | None = None
+) -> Pieces:
+    """Gram pieces of `net`'s features at the data and `pts` (float64; with gradients if the net has).
+    `at`: phi at which to combine the PDE rows of the segments before their products (`physics` then reads
+    them at that phi only; S + 1 row blocks instead of (S + 1)^2 products, for many segments)."""
     sc = problem.scales
     dt = torch.float64
     d = problem.data
@@ -122,6 +128,9 @@ def pieces(problem: GirderProblem, net: PINN, pts: Points, y: np.ndarray) -> Pie
     ]
     X.append(sc.inertia * jp.dt(2))
     K = torch.stack(X)  # (S + 1, n_f, D)
+    if at is not None:
+        theta = problem.coefficients(at)[0]
+        K = torch.einsum("i,inD->nD", torch.cat([theta, torch.ones(1, dtype=dt)]), K)[None]
     f = problem.load(xi, tau)
     # supports and initial state
     nb = pts.bc_tau.numel()
@@ -145,6 +154,7 @@ def pieces(problem: GirderProblem, net: PINN, pts: Points, y: np.ndarray) -> Pie
         mm=torch.stack(mm),
         ic=ic,
         counts={"data": len(y), "pde": xi.numel(), "bc": 2 * nb, "ic": pts.ic_xi.numel()},
+        collapsed=at is not None,
     )
 
 
@@ -165,7 +175,9 @@ def physics(problem: GirderProblem, P: Pieces, phi: torch.Tensor, sc: Scales_):
     theta, left, right, lam = problem.coefficients(phi)
     D = P.dd.shape[0]
     # PDE: sum_i a_i X_i c + f (c_E - lambda), a = (theta, 1)
-    a = torch.cat([theta, torch.ones(1, dtype=torch.float64)])
+    a = torch.ones(1, dtype=torch.float64)
+    if not P.collapsed:
+        a = torch.cat([theta, a])
     Gnn = torch.einsum("i,j,ijDE->DE", a, a, P.KK)
     Gne = torch.einsum("i,iD->D", a, P.Kf)
     sf2 = sc.s_f**2
@@ -299,8 +311,9 @@ class GirderTrainer:
         problem, settings, sc, i = self.problem, self.settings, self.sc, self.step
         if i and i % settings.resample_every == 0:
             self.pts = Points.draw(settings, self.gen)
-        P = pieces(problem, self.net, self.pts, problem.y)
         phit = torch.as_tensor(self.phi)
+        at = phit if problem.collapse else None
+        P = pieces(problem, self.net, self.pts, problem.y, at)
         with torch.no_grad():
             E = enrichment_column(problem, phit)
         Ap, gp, kp = physics(problem, P, phit, sc)

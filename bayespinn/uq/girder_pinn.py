@@ -1,4 +1,5 @@
-"""PINNs on real girders: EI per segment, rotational springs at the bearings, an uncertain axle-load factor.
+"""PINNs on real girders: EI per segment, rotational springs at the bearings, an uncertain axle-load factor;
+and a smooth EI field, whose phi is the field's four coordinates read per piece (`uq.field_pinn`).
 
 The network's output, in the units of `pinn.problem.Scales` (u = U w, x = L xi, t = T tau), is
 
@@ -79,6 +80,9 @@ from ..errors import InputError
 from ..threads import one_blas_thread, torch_threads
 from .ar1 import AR1Noise
 from .ensemble_pool import MAX_SCATTER_RATIO
+from .field_pinn import NAMES as FIELD_NAMES
+from .field_pinn import FieldGirderProblem, make_problem
+from .field_reference import FieldPredictor, FieldReference
 from .girder_lastlayer import GirderLastLayer, split_z
 from .girder_net import (
     GirderNetSettings,
@@ -108,10 +112,14 @@ def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
 def check_girder(cfg: Config, data: Measurements, display: str) -> None:
     """Refuse what the girder PINN does not describe (exit 2, naming the field): what a crossing leaves to
     infer (a speed, an entry time, damping, fluctuating forces, several crossings: it takes the crossing as
-    stated), an EI field, and too many segments for the data."""
+    stated), too many segments for the data, and what a smooth EI field's reference does not describe."""
     from ..crossings.checks import refuse_crossings
 
     refuse_crossings(cfg, data, display)
+    if cfg.model.EI_field == "smooth":
+        from .girder_field import check_field
+
+        return check_field(cfg, data)
     if cfg.model.noise not in ("iid", "ar1"):
         raise InputError("model.noise", cfg.model.noise, f"'iid' or 'ar1' for the {display}")
     check_segments(cfg, data)
@@ -136,6 +144,8 @@ def _posterior(
     runtime: float,
 ) -> GirderReference:
     """The pipeline's Posterior of draws z (chain, draw, dim): phi, log sigma (and atanh rho when `ar1`)."""
+    if isinstance(problem, FieldGirderProblem):
+        return _field_posterior(problem, z, method, diagnostics, info, runtime)
     lay = problem.layout
     phi, log_sigma, zeta = split_z(z, problem.dim, ar1)
     sigma = np.exp(log_sigma)
@@ -164,14 +174,50 @@ def _posterior(
     )
 
 
+def _field_posterior(
+    problem: FieldGirderProblem, z: np.ndarray, method: str, diagnostics: dict, info: dict, runtime
+) -> FieldReference:
+    """The pipeline's Posterior of a smooth field's draws z (chain, draw, 5): theta, log sigma."""
+    phi, log_sigma, _ = split_z(z, problem.dim, False)
+    fp = problem.field_posterior(
+        phi.reshape(-1, problem.dim), np.exp(log_sigma).ravel(), diagnostics, runtime
+    )
+    return FieldReference(
+        method,
+        fp.EI,
+        fp.sigma,
+        diagnostics=diagnostics,
+        info={"EI_nominal": fp.EI_nominal, **info},
+        runtime_s=runtime,
+        predictor=FieldPredictor(problem.cfg, fp),
+        field=fp,
+    )
+
+
+def _inner(post):
+    """The method-level posterior a pipeline Posterior carries: the girder's or the smooth field's."""
+    return post.field if isinstance(post, FieldReference) else post.girder
+
+
+def _draws(problem: GirderProblem, post, z: np.ndarray) -> dict[str, np.ndarray]:
+    """Named draws (chain, draw) for the convergence diagnostics: a girder's parameters, or a smooth
+    field's coordinates theta and log sigma."""
+    if isinstance(problem, FieldGirderProblem):
+        return {n: z[..., i] for i, n in enumerate((*FIELD_NAMES, "log_sigma"))}
+    return post.girder.draws()
+
+
 def _info(problem: GirderProblem, settings: GirderNetSettings, ll: GirderLastLayer | None) -> dict:
+    model = {
+        "EI_segments": problem.S,
+        "supports": problem.cfg.model.supports,
+        "load_factor": "inferred" if problem.infer_load else "fixed at 1",
+        "noise": problem.cfg.model.noise,
+    }
+    if isinstance(problem, FieldGirderProblem):
+        model = {"EI_field": "smooth", "pieces": problem.S, "noise": problem.cfg.model.noise}
     out: dict[str, Any] = {
-        "model": {
-            "EI_segments": problem.S,
-            "supports": problem.cfg.model.supports,
-            "load_factor": "inferred" if problem.infer_load else "fixed at 1",
-            "noise": problem.cfg.model.noise,
-        },
+        "model": model,
         "network": (
             f"{settings.depth} x {settings.width} tanh, enriched with the girder's FE modal response "
             f"({problem.n_modes} modes and a static correction) at the current parameters"
@@ -273,10 +319,10 @@ def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
     Z, is_info = importance_sample(
         ll, zmap, ll.covariance(zmap), seeding.rng(t.seed, "noise"), t.settings
     )
-    S = t.problem.S
+    k = t.problem.dim
     return Z, {
-        "EI_segments": np.exp(Z[:, :S].mean(0)).tolist(),
-        "log_EI_sd": Z[:, :S].std(0, ddof=1).tolist(),
+        "phi_mean": Z[:, :k].mean(0).tolist(),
+        "phi_sd": Z[:, :k].std(0, ddof=1).tolist(),
         "sigma": float(np.exp(np.median(ll.split(Z)[1]))),
         "train_s": fit.seconds,
         **is_info,
@@ -301,7 +347,7 @@ def girder_ensemble_posterior(
 
     t0 = time.perf_counter()
     settings = GirderNetSettings.for_profile(profile)
-    problem = GirderProblem(data, cfg)
+    problem = make_problem(data, cfg)
     noise = _noise(cfg, data)
     tasks = [_Member(problem, settings, member_fit_seed(seed, m), noise) for m in range(members)]
     res = (executor or Executor()).map(
@@ -314,10 +360,10 @@ def girder_ensemble_posterior(
     draws, member_info = [z for z, _ in res], [i for _, i in res]
     for m, i in enumerate(member_info):
         log.info(
-            "[ensemble] member %d/%d: EI per segment %s (importance ESS %.0f)",
+            "[ensemble] member %d/%d: phi %s (importance ESS %.0f)",
             m + 1,
             members,
-            ", ".join(f"{e:.4g}" for e in i["EI_segments"]),
+            ", ".join(f"{e:.4g}" for e in i["phi_mean"]),
             i["ess"],
         )
     th = np.stack(draws)  # (member, draw, dim)
@@ -377,7 +423,7 @@ def girder_bpinn_posterior(
 
     t0 = time.perf_counter()
     settings = GirderNetSettings.for_profile(profile)
-    problem = GirderProblem(data, cfg)
+    problem = make_problem(data, cfg)
     fs = fit_seed if fit_seed is not None else member_fit_seed(seeding.stream(seed, "ensemble"), 0)
     fit = train_fit(problem, settings, fs, progress)
     ll = GirderLastLayer(
@@ -388,7 +434,7 @@ def girder_bpinn_posterior(
     ns = NUTSSettings.for_profile(profile)
     z, chains = run_chains(GirderPotential(ll), zmap, Lc, ns, seed, progress, executor)
     post = _posterior(problem, ll.ar1 is not None, z, "bpinn", {}, {}, 0.0)
-    per = {name: mcmc_diagnostics(d) for name, d in post.girder.draws().items()}
+    per = {name: mcmc_diagnostics(d) for name, d in _draws(problem, post, z).items()}
     health = nuts_health(chains)
     diag = {
         "rhat": max(v["rhat"] for v in per.values()),
@@ -402,12 +448,14 @@ def girder_bpinn_posterior(
     diag["converged"] = not why
     diag["problems"] = why
     info = _info(problem, settings, ll) | {"variant": "last-layer", "fit_s": fit.seconds}
-    post.girder.diagnostics = diag
-    post.girder.info = info
+    inner = _inner(post)
+    inner.diagnostics = diag
+    if hasattr(inner, "info"):
+        inner.info = info
     post.diagnostics = diag
     post.info = {"EI_nominal": problem.nominal, **info}
     post.sample_stats = sample_stats(chains)
-    post.runtime_s = post.girder.runtime_s = time.perf_counter() - t0
+    post.runtime_s = inner.runtime_s = time.perf_counter() - t0
     return post
 
 

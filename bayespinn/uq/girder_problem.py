@@ -34,6 +34,10 @@ class GirderProblem:
     """Everything a girder PINN fit needs besides the network: the layout of phi, its prior, the FE modal
     model at the data (the enrichment), the scales and the loads. Built once per dataset layout."""
 
+    #: whether training assembles the PDE rows at the current phi only (`girder_net.pieces`' `at`): for
+    #: many segments (a smooth field's pieces, `uq.field_pinn`); with a few, the products for any phi
+    collapse = False
+
     def __init__(self, data: Measurements, cfg: Config):
         if len(set(np.asarray(data.kind).tolist())) != 1:
             raise InputError(
