@@ -22,7 +22,7 @@ from bayespinn.errors import InputError
 from bayespinn.methods import get
 from bayespinn.pipeline import true_values_of
 from bayespinn.threads import one_blas_thread
-from bayespinn.uq import girder_field
+from bayespinn.uq import field_search, girder_field
 from bayespinn.uq.girder_field import field_grid, field_posterior
 
 EI0 = 1.03361e9
@@ -135,7 +135,7 @@ def test_the_pinn_reads_the_field_as_the_reference_does():
     assert np.allclose(pr.enrichment(th), pr.field.predict(th))
     # the start is the reference's MAP: from it, Levenberg-Marquardt climbs no further
     top = pr.field.residuals(pr.phi0[None])[1][0]
-    assert girder_field._lm_map(pr.field.residuals, pr.field.n, pr.phi0)[1] <= top + 1e-3
+    assert field_search._lm_map(pr.field.residuals, pr.field.n, pr.phi0)[1] <= top + 1e-3
     assert pr.inside(pr.phi0) and not pr.inside(np.array([0.0, 0.0, 9.0, 0.0]))
     assert np.isclose(float(pr.log_prior(torch.as_tensor(th[0]))), -0.5 * np.sum(th[0] ** 2))
 
@@ -234,10 +234,12 @@ def test_the_global_search_reaches_the_best_mode_on_gauge_data():
     own = girder_field._problem(dataclasses.replace(data, value=y), cfg)
 
     def best(starts):
-        return max(girder_field._lm_map(own.residuals, own.n, s)[1] for s in starts)
+        return max(field_search._lm_map(own.residuals, own.n, s)[1] for s in starts)
 
-    top = girder_field._lm_map(own.residuals, own.n, th)[1]
-    starts, _ = girder_field._grid_starts(own.residuals, own.y, own.a0, own.loss.sd)
+    top = field_search._lm_map(own.residuals, own.n, th)[1]
+    starts, _ = field_search._grid_starts(
+        own.residuals, own.y, own.a0, own.loss.sd, girder_field.PIECES
+    )
     assert best(starts) >= top - 1.0
     along = [np.array([own.a0, -1.0, u, 0.0]) for u in ndtri((np.arange(16) + 0.5) / 16)]
     assert best(along) < top - 50.0

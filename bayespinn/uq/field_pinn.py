@@ -10,7 +10,7 @@ modal reference maps it (`girder_field.LocalLoss`): EI(x) = EI_level (1 - depth 
 * the enrichment E(phi) is the reference's surrogate at phi, strain gauges read at the field's own EI at
   the gauge (`girder_field`), so E is the reference's model exactly, as on every other girder;
 * the network's PDE rows carry (EI(x) N_xx)_xx through the pieces' smoothed indicators, as segments do;
-* the prior is N(0, I) on phi, the start the reference's global MAP search (`girder_field._grid_starts`).
+* the prior is N(0, I) on phi, the start the reference's global MAP search (`field_search._grid_starts`).
 
 Each Adam step assembles the PDE rows' Gram matrix at the current phi only (`FieldGirderProblem.
 collapse`): with 48 pieces the products of every pair of pieces' rows (the segment girder's form, for any
@@ -91,7 +91,7 @@ class FieldGirderProblem(GirderProblem):
         self.y = np.asarray(data.value, float)
         self.a_u, self.a_xx = (np.asarray(w, float) for w in data.weights)
         f = self.field
-        starts, _ = _grid_starts(f.residuals, f.y, f.a0, self.loss.sd)
+        starts, _ = _grid_starts(f.residuals, f.y, f.a0, self.loss.sd, PIECES)
         fits = [_lm_map(f.residuals, f.n, s) for s in starts]
         self.phi0 = np.asarray(max(fits, key=lambda r: r[1])[0], float)
         r, _ = f.residuals(self.phi0[None])
