@@ -86,13 +86,22 @@ def field_reference(
     data: Measurements, cfg: Config, *, seed, progress: bool = False
 ) -> FieldReference:
     """The reference posterior of a smooth EI field for `cfg` given the data."""
-    fp = field_posterior(data, cfg, seed=seed, progress=progress)
+    return field_result(
+        REFERENCE_KEY, cfg, field_posterior(data, cfg, seed=seed, progress=progress)
+    )
+
+
+def field_result(
+    key: str, cfg: Config, fp: FieldPosterior, info: dict | None = None
+) -> FieldReference:
+    """The pipeline's Posterior of method `key` carrying the field posterior `fp` (the reference's, or a
+    PINN method's, `uq.girder_pinn`), its predictor the field's surrogate."""
     return FieldReference(
-        REFERENCE_KEY,
+        key,
         fp.EI,
         fp.sigma,
         diagnostics=fp.diagnostics,
-        info={"EI_nominal": fp.EI_nominal},
+        info={"EI_nominal": fp.EI_nominal, **(info or {})},
         runtime_s=fp.runtime_s,
         predictor=FieldPredictor(cfg, fp),
         field=fp,

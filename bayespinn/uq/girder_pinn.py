@@ -82,7 +82,7 @@ from .ar1 import AR1Noise
 from .ensemble_pool import MAX_SCATTER_RATIO
 from .field_pinn import NAMES as FIELD_NAMES
 from .field_pinn import FieldGirderProblem, make_problem
-from .field_reference import FieldPredictor, FieldReference
+from .field_reference import FieldReference, field_result
 from .girder_lastlayer import GirderLastLayer, split_z
 from .girder_net import (
     GirderNetSettings,
@@ -182,16 +182,7 @@ def _field_posterior(
     fp = problem.field_posterior(
         phi.reshape(-1, problem.dim), np.exp(log_sigma).ravel(), diagnostics, runtime
     )
-    return FieldReference(
-        method,
-        fp.EI,
-        fp.sigma,
-        diagnostics=diagnostics,
-        info={"EI_nominal": fp.EI_nominal, **info},
-        runtime_s=runtime,
-        predictor=FieldPredictor(problem.cfg, fp),
-        field=fp,
-    )
+    return field_result(method, problem.cfg, fp, info)
 
 
 def _inner(post):
