@@ -68,6 +68,7 @@ class GirderLastLayer:
             self.P = _detach(pieces(problem, fit.net, self.pts, problem.y))
         # pseudo-sds from the fit's own residuals at its phi (a function of the fit, stated not tuned)
         self.s_f, self.s_b, self.s_i, self.s_w, self.c_fit = self._scales(fit.phi)
+        self.network_share = self._network_share(fit.phi)
         self.n = problem.y.size
         self.phi_fit = np.asarray(fit.phi, float)
         self.ar1 = noise
@@ -106,6 +107,17 @@ class GirderLastLayer:
         s_i = max(rms(cn @ P.ic @ cn, 2 * k["ic"]), MIN_PSEUDO_SD)
         s_w = WEIGHT_PRIOR_FACTOR * float(c.abs().max())
         return s_f, s_b, s_i, s_w, c.detach()
+
+    @torch.no_grad()
+    def _network_share(self, phi: np.ndarray) -> float:
+        """The share of the fitted response's energy at the data points that the network's own columns carry
+        beyond the enrichment (the reference's modal model at phi): |D c_n|^2 / |D c_n + c_E E|^2 at the fit's
+        output layer (c_n, c_E) (`uq.lastlayer`'s `network_share` for the uniform girder)."""
+        E = enrichment_column(self.problem, torch.as_tensor(phi))
+        cn, ce = self.c_fit[:-1], self.c_fit[-1]
+        w_net = self.P.Phi_d @ cn
+        w_fit = w_net + ce * E
+        return float(w_net.pow(2).sum() / w_fit.pow(2).sum().clamp_min(1e-300))
 
     def scales(self, sigma) -> Scales_:
         return Scales_(sigma, self.s_f, self.s_b, self.s_i, self.s_w)

@@ -315,6 +315,7 @@ def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
         "phi_mean": Z[:, :k].mean(0).tolist(),
         "phi_sd": Z[:, :k].std(0, ddof=1).tolist(),
         "sigma": float(np.exp(np.median(ll.split(Z)[1]))),
+        "network_share": ll.network_share,
         "train_s": fit.seconds,
         **is_info,
     }
@@ -369,7 +370,12 @@ def girder_ensemble_posterior(
         "converged": bool(ratio <= MAX_SCATTER_RATIO and min_ess >= ESS_MIN),
         "scheme": "each member's last-layer posterior by adaptive importance sampling; members pooled",
     }
-    info = _info(problem, settings, None) | {"members": member_info}
+    shares = [i["network_share"] for i in member_info]
+    info = _info(problem, settings, None) | {
+        "network_share": float(np.median(shares)),  # the uniform girder's pooling reports the median too
+        "member_network_share": shares,
+        "members": member_info,
+    }
     return _posterior(
         problem,
         noise is not None,
@@ -438,7 +444,11 @@ def girder_bpinn_posterior(
     why = problems(diag)
     diag["converged"] = not why
     diag["problems"] = why
-    info = _info(problem, settings, ll) | {"variant": "last-layer", "fit_s": fit.seconds}
+    info = _info(problem, settings, ll) | {
+        "variant": "last-layer",
+        "fit_s": fit.seconds,
+        "network_share": ll.network_share,  # of the fit the posterior is built on
+    }
     inner = _inner(post)
     inner.diagnostics = diag
     if hasattr(inner, "info"):
