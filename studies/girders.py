@@ -82,6 +82,21 @@ def parameters(summary_method: dict, truth: dict) -> dict[str, tuple[list, float
     return {k: v for k, v in out.items() if v[1] is not None and np.isfinite(v[1])}
 
 
+def field_metrics(summary_method: dict, truth: dict) -> dict:
+    """A smooth field's band and deepest point against the truth: the share of the span where the 90 % band
+    holds the true EI(x), and how far the posterior mean's deepest point lies from the truth's [m]; {} for a
+    girder without a field."""
+    m = summary_method
+    if "EI_x" not in m or "EI_x" not in truth:
+        return {}
+    x, mean = np.asarray(m["EI_x"]["x"]), np.asarray(m["EI_x"]["mean"])
+    true = np.asarray(truth["EI_x"]["EI"])
+    return {
+        "EI_x_coverage": m["EI_x"]["coverage"],
+        "deepest_offset_m": float(abs(x[np.argmin(mean)] - x[np.argmin(true)])),
+    }
+
+
 def replicate(cfg, snr: float | None, seed: int, i: int, opts) -> dict:
     seq = data_seed(seed, i)
     t0 = time.perf_counter()
@@ -90,16 +105,7 @@ def replicate(cfg, snr: float | None, seed: int, i: int, opts) -> dict:
     res = analyse(data, cfg, methods=["modal"], seed=seq, snr_db=snr, opts=opts, truth=truth)
     m = res.summary["methods"]["modal_mcmc"]
     hits = {k: bool(ci[0] <= t <= ci[1]) for k, (ci, t) in parameters(m, truth).items()}
-    field = {}
-    if (
-        "EI_x" in m and "EI_x" in truth
-    ):  # a smooth field: its band and deepest point against the truth
-        x, mean = np.asarray(m["EI_x"]["x"]), np.asarray(m["EI_x"]["mean"])
-        true = np.asarray(truth["EI_x"]["EI"])
-        field = {
-            "EI_x_coverage": m["EI_x"]["coverage"],
-            "deepest_offset_m": float(abs(x[np.argmin(mean)] - x[np.argmin(true)])),
-        }
+    field = field_metrics(m, truth)
     return {
         "index": i,
         "hits": hits,
