@@ -285,10 +285,11 @@ def time_breakdown(posteriors: dict[str, Posterior]) -> dict:
     ensemble's pooling; everything for the modal reference)."""
     out = {}
     for k, p in posteriors.items():
-        fit = (p.diagnostics or {}).get("fit_runtime_s")
+        d = p.diagnostics or {}
+        fit = d.get("fit_runtime_s")
         entry = {"wall": float(p.runtime_s)}
         if isinstance(fit, int | float) and fit >= 0:
-            if k == "ensemble" or fit > p.runtime_s:
+            if d.get("fit_runtime_summed") or fit > p.runtime_s:
                 entry["training_summed_over_workers"] = float(fit)
             else:
                 entry["training"] = float(fit)

@@ -153,6 +153,15 @@ def test_the_manifest_says_where_the_time_went():
     post.runtime_s = 5.0
     ens = Posterior("ensemble", [[1.0, 2.0]], [[1.0, 1.0]], diagnostics={"fit_runtime_s": 8.0})
     ens.runtime_s = 5.0
+    # members trained in parallel for less than the wall time: still a sum over workers, as it says
+    par = Posterior(
+        "ensemble", [[1.0]], [[1.0]], diagnostics={"fit_runtime_s": 3.0, "fit_runtime_summed": True}
+    )
+    par.runtime_s = 5.0
     out = time_breakdown({"bpinn": post, "ensemble": ens})
     assert out["bpinn"] == {"wall": 5.0, "training": 3.0, "rest": 2.0}
     assert out["ensemble"] == {"wall": 5.0, "training_summed_over_workers": 8.0}
+    assert time_breakdown({"ensemble": par})["ensemble"] == {
+        "wall": 5.0,
+        "training_summed_over_workers": 3.0,
+    }

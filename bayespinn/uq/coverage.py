@@ -253,7 +253,7 @@ def study_options(method: str, snr_db, opts: RunOptions | None) -> RunOptions:
     opts = dataclasses.replace(
         opts or RunOptions(), snr_db=snr_db, progress=False, executor=Executor("local", workers=1)
     )
-    if method == "modal" and opts.mcmc is None:
+    if methods.get(method).reference and opts.mcmc is None:
         from .sampler import MCMCSettings
 
         opts = dataclasses.replace(opts, mcmc=MCMCSettings.for_coverage())

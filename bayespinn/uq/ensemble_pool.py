@@ -177,6 +177,7 @@ def pooled_posterior(
         "convergence_checks": {k: ok for k, (ok, _) in checks.items()},
         **({"problems": problems} if problems else {}),
         "fit_runtime_s": p1.runtime_s + p2.runtime_s,
+        "fit_runtime_summed": True,  # over the members, which train in parallel worker processes
         "beta_factor": float(np.median(p2.beta_factor)),
         "training": training,
     }

@@ -372,7 +372,9 @@ def girder_ensemble_posterior(
     }
     shares = [i["network_share"] for i in member_info]
     info = _info(problem, settings, None) | {
-        "network_share": float(np.median(shares)),  # the uniform girder's pooling reports the median too
+        "network_share": float(
+            np.median(shares)
+        ),  # the uniform girder's pooling reports the median too
         "member_network_share": shares,
         "members": member_info,
     }
