@@ -148,16 +148,6 @@ class ModelSpec:
                 _check_number("model.EI_nominal", self.EI_nominal, positive=True),
             )
 
-    @property
-    def ideal(self) -> bool:
-        """Uniform EI, pinned supports, i.i.d. noise: the model every method describes."""
-        return (
-            self.EI_segments == 1
-            and self.supports == "pinned"
-            and self.noise == "iid"
-            and self.EI_field == "segments"
-        )
-
 
 @dataclass(frozen=True)
 class Config:
@@ -215,8 +205,9 @@ class Config:
 
     @property
     def ideal(self) -> bool:
-        """The analysis model is a uniform, pinned girder under known loads with white noise."""
-        return self.model.ideal and not self.infers_load_factor
+        """The analysis model is a uniform, pinned girder under known loads with white noise: not a real
+        girder (`real_girder`, the one test of which world this is) and i.i.d. noise."""
+        return not self.real_girder and self.model.noise == "iid"
 
     def identity(self) -> dict:
         """`dataclasses.asdict` of this configuration without the real-girder and noise fields at their
