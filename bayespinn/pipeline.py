@@ -193,7 +193,7 @@ def analyse(
     timings = {}
     for m in chosen:
         log.info("[%s] running on %d %s measurements", m.key, len(data), data.case)
-        p = m.infer(data, cfg, seed=seed)
+        p = m.posterior(data, cfg, seed=seed)
         posts[m.key] = p
         timings[m.key] = p.runtime_s
         s = p.summary(truth)["EI"]

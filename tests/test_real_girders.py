@@ -198,13 +198,12 @@ def test_methods_refuse_what_they_cannot_describe_before_anything_runs(
     ("extra", "field"),
     [
         ("[vehicle]\nspeed_sd = 0.01\n", "vehicle.speed_sd"),
-        ("[vehicle]\nentry_time = 0.5\n", "vehicle.entry_time"),
         ('[model]\ndamping = "inferred"\n', "model.damping"),
     ],
 )
 def test_girder_pinns_refuse_a_crossing_to_infer(tmp_path, method, extra, field):
-    """A PINN method on a girder with EI per segment takes the crossing as stated: a speed, an entry time or
-    damping declared uncertain is refused (exit 2, one line naming the field, nothing written), not silently
+    """A PINN method on a girder with EI per segment takes the crossing as stated: a speed or damping
+    declared uncertain is refused (exit 2, one line naming the field, nothing written), not silently
     analysed with the stated values (before this check the ensemble ran and reported an interval)."""
     text = "[model]\nEI_segments = 2\n" + extra.replace("[model]\n", "")
     cfg = _toml(tmp_path, text)

@@ -132,7 +132,19 @@ class Method:
             )
 
     def infer(self, data: Measurements, config: Config, *, seed) -> Posterior:
+        """The posterior on `data`; a method that takes the crossing as stated (not `real_crossings`) is
+        given the data on the crossing's clock, its first axle entering at t = 0 (`posterior` sees to it)."""
         raise NotImplementedError
+
+    def posterior(self, data: Measurements, config: Config, *, seed) -> Posterior:
+        """`infer` on the data as recorded. A method that takes the crossing as stated reads a recording that
+        starts before the entry on the crossing's clock, and predicts on the data's (`methods.clock`)."""
+        if self.real_crossings:
+            return self.infer(data, config, seed=seed)
+        from .clock import on_data_clock, on_entry_clock
+
+        d, c, te = on_entry_clock(data, config)
+        return on_data_clock(self.infer(d, c, seed=seed), te)
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.settings!r})"
