@@ -1,6 +1,7 @@
 """The smooth EI field's posterior search and sampler (`uq.girder_field` explains the model): a global
 grid whose local maxima start Levenberg-Marquardt runs (`_grid_starts`, `_lm_map`), the distinct modes
-(`_distinct`), and adaptive multiple importance sampling around them (`_amis`). Each takes the field's
+(`_distinct`), and adaptive multiple importance sampling around them (`amis`, also the girder PINN's
+sampler of each member's last-layer posterior, `uq.girder_pinn`). Each takes the field's
 `residuals` or `log_target` (`girder_field._Problem`), so it knows nothing of the girder."""
 
 from __future__ import annotations
@@ -145,17 +146,18 @@ def _log_t(dz: np.ndarray, Lc: np.ndarray) -> np.ndarray:
     )
 
 
-def _amis(log_target, modes, rng, bar):
+def amis(log_target, modes, rng, bar=None, max_rounds: int = AMIS_MAX_ROUNDS):
     """Adaptive multiple importance sampling: each round (at least AMIS_ROUNDS, then until the pooled
-    effective sample size reaches ESS_MIN, at most AMIS_MAX_ROUNDS) draws DRAWS_PER_ROUND from a
+    effective sample size reaches ESS_MIN, at most `max_rounds`) draws DRAWS_PER_ROUND from a
     multivariate t per mode, the first round's around the mode's Laplace fit, each later one at the weighted mean and
     covariance of the draws of that mode's proposals so far (weights tempered until their effective sample
     size is at least AMIS_TEMPER_ESS of the draws, so one heavy draw cannot collapse a proposal). Every
     draw is weighted against the equal mixture of all proposals (deterministic-mixture weights).
-    Returns the draws, their log weights, their RSS and the number of evaluations."""
+    `log_target` maps draws (W, d) to (log target, RSS) (W,) each; `bar` (optional) is advanced once a
+    round. Returns the draws, their log weights, their RSS and the number of evaluations."""
     props = [(f["theta"], np.linalg.cholesky(np.linalg.inv(f["H"]))) for f in modes]
     all_props, pts, lps, rss, owner = [], [], [], [], []
-    for k in range(AMIS_MAX_ROUNDS):
+    for k in range(max_rounds):
         for j, (mean, Lc) in enumerate(props):
             all_props.append((mean, Lc))
             z = rng.standard_normal((DRAWS_PER_ROUND, mean.size))
@@ -169,7 +171,8 @@ def _amis(log_target, modes, rng, bar):
         P = np.concatenate(pts)
         log_q = np.logaddexp.reduce([_log_t(P - m_, L_) for m_, L_ in all_props], axis=0)
         logw = np.concatenate(lps) - (log_q - math.log(len(all_props)))
-        bar.update(1)
+        if bar is not None:
+            bar.update(1)
         w = np.exp(logw - np.max(logw))
         if k + 1 >= AMIS_ROUNDS and w.sum() ** 2 / np.sum(w**2) >= ESS_MIN:
             break

@@ -57,10 +57,10 @@ from .field_search import (
     AMIS_MAX_ROUNDS,
     STARTS,
     SUPPORT_SD,
-    _amis,
     _distinct,
     _grid_starts,
     _lm_map,
+    amis,
 )
 from .girder_map import MODE_STEPS
 from .girder_posterior import DAMAGE_FRACTION
@@ -291,7 +291,7 @@ def _field_posterior(data, cfg, seed, progress, t0) -> FieldPosterior:
         modes.append({"theta": th, "H": H, "lap": lp_map - 0.5 * logdet})
         bar.update(1)
     modes = _distinct(modes)
-    pts, logw, rss, k = _amis(log_target, modes, rng, bar)
+    pts, logw, rss, k = amis(log_target, modes, rng, bar)
     bar.close()
     evals += k
     W = np.exp(logw - logw.max())

@@ -38,15 +38,14 @@ class GirderNetSettings:
     n_ic: int = 200
     resample_every: int = 100
     theta_every: int = 100
-    is_samples: int = 4000
     is_draws: int = 800
 
     @classmethod
     def for_profile(cls, profile: str) -> GirderNetSettings:
         if profile == "smoke":
-            return cls(16, 2, 60, 3e-3, 3e-4, 300, 40, 60, 30, 30, 1000, 200)
+            return cls(16, 2, 60, 3e-3, 3e-4, 300, 40, 60, 30, 30, 200)
         if profile == "paper":
-            return cls(64, 5, 2000, 2e-3, 1e-4, 2500, 400, 1000, 100, 200, 8000, 1600)
+            return cls(64, 5, 2000, 2e-3, 1e-4, 2500, 400, 1000, 100, 200, 1600)
         return cls()
 
 
