@@ -16,15 +16,20 @@ def needs_crossings(cfg: Config, data: Measurements | None = None) -> bool:
     read: a speed or entry-time sd, an entry time other than 0, inferred damping, fluctuating axle forces,
     [[crossing]] tables, or a crossing column with several names."""
     vehicles = [cfg.vehicle] + [c.vehicle for c in cfg.crossings]
-    several = bool(cfg.crossings) or (
-        data is not None and data.crossing is not None and len(set(data.crossing)) > 1
-    )
     return (
-        several
+        several_crossings(cfg, data)
         or cfg.model.damping == "inferred"
         or cfg.model.axle_forces == "fluctuating"
         or any(v.model == "sprung" for v in vehicles)
         or any(v.speed_sd > 0 or v.entry_time_sd > 0 or v.entry_time != 0 for v in vehicles)
+    )
+
+
+def several_crossings(cfg: Config, data: Measurements | None = None) -> bool:
+    """Whether the analysis holds several crossings: [[crossing]] tables, or a crossing column with several
+    names."""
+    return bool(cfg.crossings) or (
+        data is not None and data.crossing is not None and len(set(data.crossing)) > 1
     )
 
 
@@ -48,10 +53,7 @@ def refuse_crossings(cfg: Config, data: Measurements | None, display: str) -> No
         raise InputError("model.damping", cfg.model.damping, f"'known' {why}")
     if cfg.model.axle_forces != "constant":
         raise InputError("model.axle_forces", cfg.model.axle_forces, f"'constant' {why}")
-    several = bool(cfg.crossings) or (
-        data is not None and data.crossing is not None and len(set(data.crossing)) > 1
-    )
-    if several:
+    if several_crossings(cfg, data):
         raise InputError(
             "[[crossing]]", len(cfg.crossings) or "a crossing column", f"one crossing {why}"
         )
