@@ -36,6 +36,7 @@ from .girder_field import (
     SUB,
     SUPPORT_SD,
     FieldPosterior,
+    _distinct,
     _grid_starts,
     _lm_map,
     _problem,
@@ -94,6 +95,14 @@ class FieldGirderProblem(GirderProblem):
         starts, _ = _grid_starts(f.residuals, f.y, f.a0, self.loss.sd, PIECES)
         fits = [_lm_map(f.residuals, f.n, s) for s in starts]
         self.phi0 = np.asarray(max(fits, key=lambda r: r[1])[0], float)
+        # the posterior's distinct modes as the reference finds them (theta, Hessian, Laplace evidence):
+        # each member's sampler starts a proposal at every one (`girder_pinn.importance_sample`)
+        self.modes = _distinct(
+            [
+                {"theta": th, "H": H, "lap": lp - 0.5 * np.linalg.slogdet(H)[1]}
+                for th, lp, H, _ in fits
+            ]
+        )
         r, _ = f.residuals(self.phi0[None])
         self.sigma0 = math.sqrt(float(r[0] @ r[0]) / self.y.size)
         self.n_modes = f.n_modes

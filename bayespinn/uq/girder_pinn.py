@@ -236,21 +236,30 @@ def _one_thread(fn):
 
 
 def importance_sample(
-    ll: GirderLastLayer, z_map: np.ndarray, cov: np.ndarray, rng: np.random.Generator, settings
+    ll: GirderLastLayer,
+    z_map: np.ndarray,
+    cov: np.ndarray,
+    rng: np.random.Generator,
+    settings,
+    others: tuple = (),
 ) -> tuple[np.ndarray, dict]:
     """Draws of one member's exact last-layer posterior by adaptive multiple importance sampling, the smooth
     field reference's sampler (`field_search.amis`): multivariate t proposals, the first at the Laplace
     covariance times `IS_INFLATE^2`, each next at the tempered weighted moments of every draw so far, every
     draw weighted against the mixture of all proposals; at least `field_search.AMIS_ROUNDS` rounds, then
     until the effective sample size reaches the convergence verdict's `ESS_MIN` (at most `IS_MAX_ROUNDS`). Returns `settings.is_draws` draws resampled from the weighted ones, the
-    effective sample size and the number of draws evaluated."""
+    effective sample size and the number of draws evaluated. `others`: further (z, covariance) starts, one
+    proposal each (the other modes of a smooth field's posterior)."""
     from .field_search import amis
 
     def target(Z: np.ndarray):
         return ll.log_post_many(Z), np.zeros(len(Z))
 
-    start = {"theta": np.asarray(z_map, float), "H": np.linalg.inv(cov * IS_INFLATE**2)}
-    Z, lw, _, n = amis(target, [start], rng, max_rounds=IS_MAX_ROUNDS)
+    starts = [
+        {"theta": np.asarray(z, float), "H": np.linalg.inv(c * IS_INFLATE**2)}
+        for z, c in ((z_map, cov), *others)
+    ]
+    Z, lw, _, n = amis(target, starts, rng, max_rounds=IS_MAX_ROUNDS)
     w = _normalised(lw)
     idx = rng.choice(Z.shape[0], size=settings.is_draws, p=w)
     return Z[idx], {"ess": float(1.0 / np.sum(w**2)), "max_weight": float(w.max()), "samples": n}
@@ -278,8 +287,9 @@ def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
     fit = train_fit(t.problem, t.settings, t.seed)  # quiet: the pool's bar shows the members
     ll = GirderLastLayer(t.problem, fit, t.settings, seeding.stream(t.seed, "collocation"), t.noise)
     zmap = ll.map(ll.start(fit.phi))
+    cov = ll.covariance(zmap)
     Z, is_info = importance_sample(
-        ll, zmap, ll.covariance(zmap), seeding.rng(t.seed, "noise"), t.settings
+        ll, zmap, cov, seeding.rng(t.seed, "noise"), t.settings, _other_modes(t.problem, zmap, cov)
     )
     k = t.problem.dim
     return Z, {
@@ -290,6 +300,25 @@ def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
         "train_s": fit.seconds,
         **is_info,
     }
+
+
+def _other_modes(problem: GirderProblem, z_map: np.ndarray, cov: np.ndarray) -> tuple:
+    """Starts for a member's sampler beside its MAP: a smooth field's other posterior modes as the
+    reference's search finds them (their theta and Laplace covariance, log sigma at the member's MAP and
+    sd), those more than one Laplace sd from the member's MAP; none for a segmented girder."""
+    modes = getattr(problem, "modes", None) or []
+    k = problem.dim
+    out = []
+    for m in modes:
+        d = np.asarray(m["theta"], float) - z_map[:k]
+        C = np.linalg.inv(m["H"])
+        if d @ np.linalg.solve(C, d) <= 1.0:
+            continue  # the member's own mode
+        c = cov.copy()
+        c[:k, :k] = C
+        c[:k, k:] = c[k:, :k] = 0.0
+        out.append((np.r_[m["theta"], z_map[k:]], c))
+    return tuple(out)
 
 
 @_one_thread
