@@ -184,26 +184,27 @@ def test_importance_sampler_draws_until_its_effective_sample_size_target(last_la
     target. Negative control: with the target out of reach it draws every round it may, and says the
     effective sample size it reached."""
     from bayespinn.uq import field_search as FS
+    from bayespinn.uq import girder_sampling as S
 
     pr, ll, fit = last_layer
     z = ll.map(ll.start(fit.phi))
     cov = ll.covariance(z)
     smoke = G.GirderNetSettings.for_profile("smoke")
-    Z, info = G.importance_sample(ll, z, cov, np.random.default_rng(0), smoke)
+    Z, info = S.importance_sample(ll, z, cov, np.random.default_rng(0), smoke)
     assert Z.shape == (smoke.is_draws, ll.dim)
     assert info["ess"] >= G.ESS_MIN
     assert info["samples"] % FS.DRAWS_PER_ROUND == 0
     assert (
         FS.AMIS_ROUNDS * FS.DRAWS_PER_ROUND
         <= info["samples"]
-        < G.IS_MAX_ROUNDS * FS.DRAWS_PER_ROUND
+        < S.IS_MAX_ROUNDS * FS.DRAWS_PER_ROUND
     )
     # the draws are the posterior's: their mean sits at the MAP within a fraction of the Laplace sd
     sd = np.sqrt(np.diag(cov))
     assert np.all(np.abs(Z.mean(0) - z) < 0.5 * sd), (Z.mean(0) - z) / sd
     monkeypatch.setattr(FS, "ESS_MIN", 1e9)
-    _, info = G.importance_sample(ll, z, cov, np.random.default_rng(0), smoke)
-    assert info["samples"] == G.IS_MAX_ROUNDS * FS.DRAWS_PER_ROUND and info["ess"] < 1e9
+    _, info = S.importance_sample(ll, z, cov, np.random.default_rng(0), smoke)
+    assert info["samples"] == S.IS_MAX_ROUNDS * FS.DRAWS_PER_ROUND and info["ess"] < 1e9
 
 
 def test_pinn_methods_match_the_reference_on_a_damaged_girder(damaged, reference):

@@ -1,7 +1,7 @@
 """The smooth EI field's posterior search and sampler (`uq.girder_field` explains the model): a global
 grid whose local maxima start Levenberg-Marquardt runs (`_grid_starts`, `_lm_map`), the distinct modes
 (`_distinct`), and adaptive multiple importance sampling around them (`amis`, also the girder PINN's
-sampler of each member's last-layer posterior, `uq.girder_pinn`). Each takes the field's
+sampler of each member's last-layer posterior, `uq.girder_sampling`). Each takes the field's
 `residuals` or `log_target` (`girder_field._Problem`), so it knows nothing of the girder."""
 
 from __future__ import annotations

@@ -45,7 +45,7 @@ would inform phi through the network's approximation error rather than through t
 
 The B-PINN (last-layer variant) runs NUTS on (phi, log sigma) in whitened coordinates (`uq.nuts`). The deep
 ensemble trains M networks from their own starts, samples each member's exact last-layer posterior by
-adaptive multiple importance sampling (`importance_sample`: multivariate t proposals, the first at twice the
+adaptive multiple importance sampling (`uq.girder_sampling`: multivariate t proposals, the first at twice the
 Laplace sd, each next at the weighted moments of every draw so far, every draw weighted against the mixture
 of all proposals; the effective sample size is reported and checked), and pools the members in equal shares, so the spread between the networks adds to each one's
 width. Not randomise-then-optimise, as on the uniform girder (`uq.ensemble`): with five segments the
@@ -91,18 +91,11 @@ from .girder_net import (
 )
 from .girder_posterior import GirderPosterior
 from .girder_reference import GirderPredictor, GirderReference, check_segments
+from .girder_sampling import importance_sample, other_modes
 from .posterior import mcmc_diagnostics
 from .sampler import ESS_MIN
 
 log = logging.getLogger(__name__)
-
-#: adaptive importance sampling of a member's last-layer posterior (`importance_sample`): the first
-#: proposal's scale on the Laplace covariance (the posterior of a segment next to a support is skewed and up
-#: to twice the Laplace width)
-IS_INFLATE = 2.0
-#: and the most rounds it may take (twice the smooth field reference's: one member's posterior on the smooth
-#: loss, whose far flank is heavy-tailed, had an effective sample size of 308 after 10 rounds)
-IS_MAX_ROUNDS = 20
 
 
 def member_fit_seed(ensemble_seed, m: int) -> np.random.SeedSequence:
@@ -235,42 +228,6 @@ def _one_thread(fn):
     return wrapper
 
 
-def importance_sample(
-    ll: GirderLastLayer,
-    z_map: np.ndarray,
-    cov: np.ndarray,
-    rng: np.random.Generator,
-    settings,
-    others: tuple = (),
-) -> tuple[np.ndarray, dict]:
-    """Draws of one member's exact last-layer posterior by adaptive multiple importance sampling, the smooth
-    field reference's sampler (`field_search.amis`): multivariate t proposals, the first at the Laplace
-    covariance times `IS_INFLATE^2`, each next at the tempered weighted moments of every draw so far, every
-    draw weighted against the mixture of all proposals; at least `field_search.AMIS_ROUNDS` rounds, then
-    until the effective sample size reaches the convergence verdict's `ESS_MIN` (at most `IS_MAX_ROUNDS`). Returns `settings.is_draws` draws resampled from the weighted ones, the
-    effective sample size and the number of draws evaluated. `others`: further (z, covariance) starts, one
-    proposal each (the other modes of a smooth field's posterior)."""
-    from .field_search import amis
-
-    def target(Z: np.ndarray):
-        return ll.log_post_many(Z), np.zeros(len(Z))
-
-    starts = [
-        {"theta": np.asarray(z, float), "H": np.linalg.inv(c * IS_INFLATE**2)}
-        for z, c in ((z_map, cov), *others)
-    ]
-    Z, lw, _, n = amis(target, starts, rng, max_rounds=IS_MAX_ROUNDS)
-    w = _normalised(lw)
-    idx = rng.choice(Z.shape[0], size=settings.is_draws, p=w)
-    return Z[idx], {"ess": float(1.0 / np.sum(w**2)), "max_weight": float(w.max()), "samples": n}
-
-
-def _normalised(lw: np.ndarray) -> np.ndarray:
-    """Importance weights summing to one from their logs."""
-    w = np.exp(lw - lw.max())
-    return w / w.sum()
-
-
 @dataclass(frozen=True)
 class _Member:
     """One deep-ensemble member on a girder, an executor task: its result is a function of its fit seed."""
@@ -289,7 +246,7 @@ def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
     zmap = ll.map(ll.start(fit.phi))
     cov = ll.covariance(zmap)
     Z, is_info = importance_sample(
-        ll, zmap, cov, seeding.rng(t.seed, "noise"), t.settings, _other_modes(t.problem, zmap, cov)
+        ll, zmap, cov, seeding.rng(t.seed, "noise"), t.settings, other_modes(t.problem, zmap, cov)
     )
     k = t.problem.dim
     return Z, {
@@ -300,25 +257,6 @@ def _run_member(t: _Member) -> tuple[np.ndarray, dict]:
         "train_s": fit.seconds,
         **is_info,
     }
-
-
-def _other_modes(problem: GirderProblem, z_map: np.ndarray, cov: np.ndarray) -> tuple:
-    """Starts for a member's sampler beside its MAP: a smooth field's other posterior modes as the
-    reference's search finds them (their theta and Laplace covariance, log sigma at the member's MAP and
-    sd), those more than one Laplace sd from the member's MAP; none for a segmented girder."""
-    modes = getattr(problem, "modes", None) or []
-    k = problem.dim
-    out = []
-    for m in modes:
-        d = np.asarray(m["theta"], float) - z_map[:k]
-        C = np.linalg.inv(m["H"])
-        if d @ np.linalg.solve(C, d) <= 1.0:
-            continue  # the member's own mode
-        c = cov.copy()
-        c[:k, :k] = C
-        c[:k, k:] = c[k:, :k] = 0.0
-        out.append((np.r_[m["theta"], z_map[k:]], c))
-    return tuple(out)
 
 
 @_one_thread
