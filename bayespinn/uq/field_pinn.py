@@ -96,7 +96,7 @@ class FieldGirderProblem(GirderProblem):
         fits = [_lm_map(f.residuals, f.n, s) for s in starts]
         self.phi0 = np.asarray(max(fits, key=lambda r: r[1])[0], float)
         # the posterior's distinct modes as the reference finds them (theta, Hessian, Laplace evidence):
-        # each member's sampler starts a proposal at every one (`girder_pinn.importance_sample`)
+        # each member's sampler starts a proposal at every one (`girder_sampling.importance_sample`)
         self.modes = _distinct(
             [
                 {"theta": th, "H": H, "lap": lp - 0.5 * np.linalg.slogdet(H)[1]}
