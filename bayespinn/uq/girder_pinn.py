@@ -45,10 +45,10 @@ would inform phi through the network's approximation error rather than through t
 
 The B-PINN (last-layer variant) runs NUTS on (phi, log sigma) in whitened coordinates (`uq.nuts`). The deep
 ensemble trains M networks from their own starts, samples each member's exact last-layer posterior by
-adaptive multiple importance sampling (`uq.girder_sampling`: multivariate t proposals, the first at twice the
-Laplace sd, each next at the weighted moments of every draw so far, every draw weighted against the mixture
-of all proposals; the effective sample size is reported and checked), and pools the members in equal shares, so the spread between the networks adds to each one's
-width. Not randomise-then-optimise, as on the uniform girder (`uq.ensemble`): with five segments the
+adaptive multiple importance sampling (`uq.girder_sampling`: multivariate t proposals, the first at twice
+the Laplace sd, each next at the weighted moments of every draw so far, every draw weighted against the
+mixture of all proposals; the effective sample size is reported and checked), and pools the members in
+equal shares, so the spread between the networks adds to each one's width. Not randomise-then-optimise, as on the uniform girder (`uq.ensemble`): with five segments the
 posterior of log EI is far from Gaussian (the segments next to the supports are skewed, the Laplace sd of
 the middle ones 0.4x the reference's), and uncorrected randomise-then-optimise draws on the last layer gave
 sds 0.56-0.71x the reference's (smoke profile, damaged Exeter girder at 30 dB, 20 draws per member).
@@ -310,9 +310,8 @@ def girder_ensemble_posterior(
     }
     shares = [i["network_share"] for i in member_info]
     info = _info(problem, settings, None) | {
-        "network_share": float(
-            np.median(shares)
-        ),  # the uniform girder's pooling reports the median too
+        # the median, as the uniform girder's pooling reports it
+        "network_share": float(np.median(shares)),
         "member_network_share": shares,
         "members": member_info,
     }

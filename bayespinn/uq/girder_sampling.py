@@ -30,8 +30,9 @@ def importance_sample(
     field reference's sampler (`field_search.amis`): multivariate t proposals, the first at the Laplace
     covariance times `IS_INFLATE^2`, each next at the tempered weighted moments of every draw so far, every
     draw weighted against the mixture of all proposals; at least `field_search.AMIS_ROUNDS` rounds, then
-    until the effective sample size reaches the convergence verdict's `ESS_MIN` (at most `IS_MAX_ROUNDS`). Returns `settings.is_draws` draws resampled from the weighted ones, the
-    effective sample size and the number of draws evaluated. `others`: further (z, covariance) starts, one
+    until the effective sample size reaches the convergence verdict's `ESS_MIN` (at most `IS_MAX_ROUNDS`).
+    Returns `settings.is_draws` draws resampled from the weighted ones, the effective sample size and the
+    number of draws evaluated. `others`: further (z, covariance) starts, one
     proposal each (the other modes of a smooth field's posterior)."""
     from .field_search import amis
 
