@@ -32,7 +32,10 @@ def curvature_sds(
             k += 4
             H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
     try:
-        sd = np.sqrt(np.diag(np.linalg.inv(H)))
+        with np.errstate(
+            invalid="ignore"
+        ):  # a negative diagonal: not positive definite, None below
+            sd = np.sqrt(np.diag(np.linalg.inv(H)))
         if np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0):
             return sd
     except np.linalg.LinAlgError:

@@ -14,8 +14,9 @@ with Gaussian priors on theta (every prior is normal on the unconstrained scale)
 Gaussian model in (theta, w) given the hyperparameters h = (log s, log l, log sigma). Its evidence p(y | h)
 is exact and costs a few small Cholesky factors: each crossing's own block (speed, entry time, its weights)
 is eliminated first and the shared block (EI, damping) last (the precision is arrow-shaped), from Gram
-matrices X_c' X_c computed once. emcee samples h alone (three dimensions); theta is then drawn from its
-Gaussian conditional given each h. theta* is the conditional mean given the hyperparameters' maximum,
+matrices X_c' X_c computed once. h alone (three to six dimensions) is sampled by adaptive importance
+sampling from its maximum (emcee where that does not converge); theta is then drawn from its Gaussian
+conditional given each h. theta* is the conditional mean given the hyperparameters' maximum,
 re-linearised until it moves by under `MOVE_TOL` of its sd (Gauss-Newton on the marginal posterior).
 
 The check: for `N_CHECK` joint draws, log w = log p(y | theta, h) - log p_lin(y | theta, h), both with the
@@ -50,6 +51,9 @@ N_CHECK = 64
 #: the check fails when the weights' effective sample size is under this fraction of N_CHECK, or log EI's
 #: importance-weighted mean moves by more than SHIFT_MAX posterior sds
 ESS_MIN_FRACTION, SHIFT_MAX = 0.5, 0.2
+#: the hyperparameters' importance sampler: draws of its first proposal's guide (about the maximum, with
+#: the curvature's sds) and the rows its equal-weight draws are laid out in (a layout, not chains)
+HYPER_GUIDE, HYPER_CHAINS = 2000, 4
 #: draws per vectorised conditional solve
 CHUNK = 256
 #: a sprung crossing's suspension (log bounce frequency, log damping) is tabulated on TABLE_NODES^2
@@ -427,13 +431,15 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
     scale = _hyper_scale(lin, h)
     import dataclasses
 
-    settings = dataclasses.replace(
-        settings, n_walkers=max(settings.n_walkers, 2 * len(lin.hyper) + 2)
-    )
-    ch = sample(
-        lambda z: log_hyper_posterior(lin, z), h, scale, settings, seed, progress,
-        desc="crossing MCMC",
-    )  # fmt: skip
+    ch, hyper_is = _hyper_importance(lin, h, scale, seed, progress)
+    if ch is None:  # importance sampling did not converge: emcee, which needs no proposal
+        settings = dataclasses.replace(
+            settings, n_walkers=max(settings.n_walkers, 2 * len(lin.hyper) + 2)
+        )
+        ch = sample(
+            lambda z: log_hyper_posterior(lin, z), h, scale, settings, seed, progress,
+            desc="crossing MCMC",
+        )  # fmt: skip
     z = ch.draws.reshape(-1, len(lin.hyper))
     rng = np.random.default_rng(seeding.child(seed, "emcee", 9100))
     flat = lin.conditional(z, rng)
@@ -442,6 +448,8 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
         "linearisation": {
             "rounds": len(moves),
             "last_move_sd": moves[-1] if moves else None,
+            "hyper_sampler": "importance" if hyper_is["passed"] else "emcee",
+            "hyper_importance": hyper_is,
             "importance_check": chk,
             # the linearised posterior's log EI, kept beside whatever replaces it
             "log_EI_mean": float(flat[:, 0].mean()),
@@ -449,6 +457,31 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
         }
     }
     return flat, ch, lin, extra
+
+
+def _hyper_importance(lin: Linearisation, h: np.ndarray, scale: np.ndarray, seed, progress):
+    """The hyperparameters' linearised posterior by adaptive multiple importance sampling
+    (`importance.amis`) from a multivariate t about their maximum h with the curvature's sds `scale`.
+    The density is exact and cheap and has three to six dimensions, so a few rounds of a few hundred
+    evaluations reach the importance sampler's ESS and Pareto k-hat criterion, where emcee's run-length
+    rule asks for tens of thousands. Returns equal-weight draws as `Chains` (a layout of
+    `HYPER_CHAINS` rows, not independent chains) and the sampler's diagnostics; (None, diagnostics)
+    when the criterion is not met (the caller then runs emcee)."""
+    from .. import seeding
+    from ..uq.sampler import Chains
+    from .importance import amis
+
+    rng = np.random.default_rng(seeding.child(seed, "emcee", 9050))
+    guide = h[None] + scale[None] * rng.standard_normal((HYPER_GUIDE, h.size))
+    z, lp, info = amis(lambda u: log_hyper_posterior(lin, u), guide, rng, progress)
+    info = {k: v for k, v in info.items() if k != "history"}
+    if not info["passed"]:
+        return None, info
+    shape = (HYPER_CHAINS, z.shape[0] // HYPER_CHAINS)
+    ch = Chains(
+        draws=z.reshape(*shape, h.size), tau=None, steps=0, acceptance=None, lp=lp.reshape(shape)
+    )
+    return ch, info
 
 
 def _conditional_sd(lin: Linearisation, h: np.ndarray) -> np.ndarray:

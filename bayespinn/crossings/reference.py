@@ -8,7 +8,8 @@ there. With constant forces: emcee (`uq.sampler.sample`, the reference's driver)
 parameter, the noise sd integrated out and drawn afterwards from its exact inverse-gamma conditional, or
 with several crossings each one's speed and entry time by Laplace (`laplace`). With fluctuating forces the
 forces and the resonant terms (`resonance`) are integrated out exactly; the rest is linearised
-(`linearised`: emcee on the hyperparameters, the other parameters from their Gaussian conditional) and,
+(`linearised`: importance sampling, or emcee, on the hyperparameters, the other parameters from their
+Gaussian conditional) and,
 where that fails its importance check, the exact posterior is importance-sampled (`importance`). With
 constant forces, EI, damping and noise are shared by all crossings; speed, entry time and suspension are
 each crossing's own. Several crossings with fluctuating forces are analysed one at a time and EI combined
@@ -117,6 +118,7 @@ def crossings_reference(
     else:
         kind = ("linearised" if forces else "laplace") if laplace else "emcee"
     extra: dict = {}
+    hyper_is = False  # the linearised scheme's hyperparameters by importance sampling
     if (
         kind == "laplace"
     ):  # each crossing's speed and entry time by Laplace inside the shared likelihood
@@ -150,6 +152,7 @@ def crossings_reference(
                     f"({imp['criterion']}: ESS {imp['ess']:.0f}, k-hat {imp['khat']:.2f})",
                     RuntimeWarning, stacklevel=2,
                 )  # fmt: skip
+        hyper_is = kind == "linearised" and extra["linearisation"]["hyper_sampler"] == "importance"
         draws = flat.reshape(*shape, L.dim)
     else:
         if forces:  # the whole maximum under the exact likelihood
@@ -182,7 +185,8 @@ def crossings_reference(
     elif kind == "linearised":
         sig = par["sigma"].reshape(shape)
         scheme = (
-            "emcee on the force fluctuation's scale, time scale and sigma; the axle-force fluctuations and "
+            ("adaptive importance sampling" if hyper_is else "emcee")
+            + " on the force fluctuation's scale, time scale and sigma; the axle-force fluctuations and "
             "the other parameters, linearised about their conditional mean, integrated out exactly and "
             "drawn from their Gaussian conditional; the linearisation checked by importance weights"
         )
@@ -220,7 +224,10 @@ def crossings_reference(
         nuisance["crossings"][c.name] = e
     diag: dict = {}
     problems = []
-    if kind == "importance":  # weighted draws: the weights' ESS and k-hat, not chain statistics
+    if kind == "linearised" and hyper_is:  # resampled importance draws: the weights' ESS, not R-hat
+        imp = extra["linearisation"]["hyper_importance"]
+        diag.update(rhat=None, ess_bulk=imp["ess"], ess_tail=imp["ess"])
+    elif kind == "importance":  # weighted draws: the weights' ESS and k-hat, not chain statistics
         imp = extra["importance"]
         diag.update(rhat=None, ess_bulk=imp["ess"], ess_tail=imp["ess"])
         if not imp["passed"]:
@@ -263,7 +270,7 @@ def crossings_reference(
         sample_stats=(
             {"lp": lp_is.reshape(shape)}
             if kind == "importance"
-            else {"lp": ch.lp, "acceptance": ch.walker_acceptance}
+            else {k: v for k, v in (("lp", ch.lp), ("acceptance", ch.walker_acceptance)) if v is not None}
         ),
         nuisance=nuisance, crossing_names=tuple(c.name for c in post.terms),
     )  # fmt: skip
