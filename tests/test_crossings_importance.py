@@ -93,3 +93,24 @@ def test_amis_is_a_function_of_its_seed():
 def test_a_target_with_no_support_near_the_guide_is_an_error():
     with pytest.raises(RuntimeError, match="no draw inside"):
         amis(lambda z: np.full(z.shape[0], -np.inf), _guide(0), np.random.default_rng(0))
+
+
+def test_curvature_sds_of_a_gaussian_and_none_where_there_is_no_curvature():
+    """The Laplace sds that start the hyperparameters' importance sampler: exact on a Gaussian (central
+    differences are exact on a quadratic), and None, silently, where the Hessian is not positive definite
+    or a difference point lies outside the support (the caller then uses fixed scales)."""
+    import warnings
+
+    from bayespinn.crossings.curvature import curvature_sds
+
+    sd = np.array([1.0, 2.0, 0.1])
+    step = np.full(3, 1e-2)
+    got = curvature_sds(lambda p: 0.5 * np.sum((p / sd) ** 2, axis=1), np.zeros(3), step)
+    np.testing.assert_allclose(got, sd, rtol=1e-6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        edge = curvature_sds(
+            lambda p: np.where(p[:, 0] > 0, np.inf, 0.5 * np.sum(p**2, axis=1)), np.zeros(3), step
+        )
+        assert edge is None
+        assert curvature_sds(lambda p: -0.5 * np.sum(p**2, axis=1), np.zeros(3), step) is None

@@ -26,18 +26,19 @@ def curvature_sds(
     f = neg_logp(np.array(pts))
     H = np.zeros((D, D))
     k = 1
-    for i in range(D):
-        for j in range(i, D):
-            fpp, fpm, fmp, fmm = f[k : k + 4]
-            k += 4
-            H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
-    try:
-        with np.errstate(
-            invalid="ignore"
-        ):  # a negative diagonal: not positive definite, None below
+    # a point outside the support (inf - inf) or a negative diagonal: not positive definite, None below
+    with np.errstate(invalid="ignore"):
+        for i in range(D):
+            for j in range(i, D):
+                fpp, fpm, fmp, fmm = f[k : k + 4]
+                k += 4
+                H[i, j] = H[j, i] = (fpp - fpm - fmp + fmm) / (4 * h[i] * h[j])
+        if not np.all(np.isfinite(H)):
+            return None
+        try:
             sd = np.sqrt(np.diag(np.linalg.inv(H)))
-        if np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0):
-            return sd
-    except np.linalg.LinAlgError:
-        pass
+            if np.all(np.isfinite(sd)) and np.all(np.linalg.eigvalsh(H) > 0):
+                return sd
+        except np.linalg.LinAlgError:
+            pass
     return None
