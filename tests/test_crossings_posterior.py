@@ -267,7 +267,7 @@ def test_the_hyperparameters_importance_draws_match_emcee(monkeypatch):
     times per group: Monte Carlo errors near 0.05 sd and 5 %). Negative control: the sampler's first
     proposal, unweighted (what the draws would be without the importance weights), is too wide by its
     inflation and must fail the sd band. The resonant terms left out as above (cost only)."""
-    from bayespinn.crossings import linearised, resonance
+    from bayespinn.crossings import hyper, linearised, resonance
     from bayespinn.uq.sampler import sample
 
     monkeypatch.setattr(resonance, "MODES", 0)
@@ -285,11 +285,11 @@ def test_the_hyperparameters_importance_draws_match_emcee(monkeypatch):
     assert seen["extra"]["linearisation"]["hyper_sampler"] == "importance"
     assert ref.diagnostics["converged"]
     lin = seen["lin"]
-    h = linearised.hyper_maximum(lin, lin.theta[lin.hyper])
-    scale = linearised._hyper_scale(lin, h)
-    ch, info = linearised._hyper_importance(lin, h, scale, 3, False)
+    h = hyper.hyper_maximum(lin, lin.theta[lin.hyper])
+    scale = hyper.hyper_scale(lin, h)
+    ch, info = hyper.hyper_importance(lin, h, scale, 3, False)
     assert info["passed"] and info["ess"] >= 400
-    mc = sample(lambda z: linearised.log_hyper_posterior(lin, z), h, scale, SETTINGS, 4, False)
+    mc = sample(lambda z: hyper.log_hyper_posterior(lin, z), h, scale, SETTINGS, 4, False)
     ref_draws = mc.draws.reshape(-1, h.size)
     m0, s0 = ref_draws.mean(0), ref_draws.std(0)
 
@@ -303,7 +303,7 @@ def test_the_hyperparameters_importance_draws_match_emcee(monkeypatch):
     from bayespinn.crossings import importance
 
     rng = np.random.default_rng(5)
-    guide = h[None] + scale[None] * rng.standard_normal((linearised.HYPER_GUIDE, h.size))
+    guide = h[None] + scale[None] * rng.standard_normal((hyper.HYPER_GUIDE, h.size))
     cov = np.cov(guide.T) * importance.FIRST_INFLATION**2
     first = stats.multivariate_t(guide.mean(0), cov, df=importance.DF).rvs(4000, random_state=rng)
     assert not agrees(first)

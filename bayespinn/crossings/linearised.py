@@ -32,7 +32,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .curvature import curvature_sds
 from .likelihood import (
     BODY_DAMPING_LOG_SD,
     BODY_FREQUENCY_LOG_SD,
@@ -51,9 +50,6 @@ N_CHECK = 64
 #: the check fails when the weights' effective sample size is under this fraction of N_CHECK, or log EI's
 #: importance-weighted mean moves by more than SHIFT_MAX posterior sds
 ESS_MIN_FRACTION, SHIFT_MAX = 0.5, 0.2
-#: the hyperparameters' importance sampler: draws of its first proposal's guide (about the maximum, with
-#: the curvature's sds) and the rows its equal-weight draws are laid out in (a layout, not chains)
-HYPER_GUIDE, HYPER_CHAINS = 2000, 4
 #: draws per vectorised conditional solve
 CHUNK = 256
 #: a sprung crossing's suspension (log bounce frequency, log damping) is tabulated on TABLE_NODES^2
@@ -368,39 +364,19 @@ def check(lin: Linearisation, flat: np.ndarray, rng: np.random.Generator) -> dic
     }
 
 
-def hyper_maximum(lin: Linearisation, start: np.ndarray) -> np.ndarray:
-    """The hyperparameters' maximum of log prior + log evidence under the linearisation."""
-    from scipy.optimize import minimize
-
-    def f(z):
-        v = float(log_hyper_posterior(lin, z[None])[0])
-        return -v if np.isfinite(v) else 1e300
-
-    res = minimize(
-        f, start, method="Nelder-Mead", options={"xatol": 1e-4, "fatol": 1e-4, "maxiter": 600}
-    )
-    return res.x if res.fun < f(start) else np.asarray(start, float)
-
-
-def log_hyper_posterior(lin: Linearisation, hyper: np.ndarray) -> np.ndarray:
-    """log p(h) + log p_lin(y | h) (the priors of `likelihood.CrossingsLogPosterior` on h)."""
-    hyper = np.atleast_2d(hyper)
-    full = np.repeat(lin.theta[None], hyper.shape[0], 0)
-    full[:, lin.hyper] = hyper
-    lp = np.where(lin.inside(hyper), lin.post.log_prior(full), -np.inf)
-    out = np.full(hyper.shape[0], -np.inf)
-    ok = np.isfinite(lp)
-    if ok.any():
-        out[ok] = lp[ok] + lin.log_evidence(hyper[ok])
-    return out
-
-
 def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings, seed, progress):
     """The module's scheme from a starting point theta0 (full layout, the hyperparameters' start in their
     columns). Returns the draws in the joint layout (chain * draw, D), the chains, the linearisation and
     diagnostics to add."""
     from .. import seeding
     from ..uq.sampler import sample
+    from .hyper import (
+        conditional_sd,
+        hyper_importance,
+        hyper_maximum,
+        hyper_scale,
+        log_hyper_posterior,
+    )
 
     theta = np.asarray(theta0, float).copy()
     hyp = [post.layout.index[n] for n in post.layout.hyper]
@@ -411,7 +387,7 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
         h = hyper_maximum(lin, h)
         theta[hyp] = h
         new = lin.conditional(h[None])[0]
-        sd = _conditional_sd(lin, h)
+        sd = conditional_sd(lin, h)
         # Gauss-Newton step with backtracking on the exact log posterior at these hyperparameters
         here = float(post(theta[None])[0])
         step = new - theta
@@ -428,10 +404,10 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
             break
     lin = Linearisation(post, theta, tabulate=True)
     h = hyper_maximum(lin, theta[lin.hyper])
-    scale = _hyper_scale(lin, h)
+    scale = hyper_scale(lin, h)
     import dataclasses
 
-    ch, hyper_is = _hyper_importance(lin, h, scale, seed, progress)
+    ch, hyper_is = hyper_importance(lin, h, scale, seed, progress)
     if ch is None:  # importance sampling did not converge: emcee, which needs no proposal
         settings = dataclasses.replace(
             settings, n_walkers=max(settings.n_walkers, 2 * len(lin.hyper) + 2)
@@ -457,46 +433,3 @@ def linearised_sample(post: CrossingsLogPosterior, theta0: np.ndarray, settings,
         }
     }
     return flat, ch, lin, extra
-
-
-def _hyper_importance(lin: Linearisation, h: np.ndarray, scale: np.ndarray, seed, progress):
-    """The hyperparameters' linearised posterior by adaptive multiple importance sampling
-    (`importance.amis`) from a multivariate t about their maximum h with the curvature's sds `scale`.
-    The density is exact and cheap and has three to six dimensions, so a few rounds of a few hundred
-    evaluations reach the importance sampler's ESS and Pareto k-hat criterion, where emcee's run-length
-    rule asks for tens of thousands. Returns equal-weight draws as `Chains` (a layout of
-    `HYPER_CHAINS` rows, not independent chains) and the sampler's diagnostics; (None, diagnostics)
-    when the criterion is not met (the caller then runs emcee)."""
-    from .. import seeding
-    from ..uq.sampler import Chains
-    from .importance import amis
-
-    rng = np.random.default_rng(seeding.child(seed, "emcee", 9050))
-    guide = h[None] + scale[None] * rng.standard_normal((HYPER_GUIDE, h.size))
-    z, lp, info = amis(lambda u: log_hyper_posterior(lin, u), guide, rng, progress)
-    info = {k: v for k, v in info.items() if k != "history"}
-    if not info["passed"]:
-        return None, info
-    shape = (HYPER_CHAINS, z.shape[0] // HYPER_CHAINS)
-    ch = Chains(
-        draws=z.reshape(*shape, h.size), tau=None, steps=0, acceptance=None, lp=lp.reshape(shape)
-    )
-    return ch, info
-
-
-def _conditional_sd(lin: Linearisation, h: np.ndarray) -> np.ndarray:
-    """theta's conditional sds given h, from 64 conditional draws (zero for the hyperparameters)."""
-    rng = np.random.default_rng(0)
-    d = lin.conditional(np.repeat(h[None], 64, 0), rng)
-    sd = d.std(axis=0)
-    sd[lin.hyper] = 0.0
-    return sd
-
-
-def _hyper_scale(lin: Linearisation, h: np.ndarray) -> np.ndarray:
-    """sds of h from the curvature of its log posterior at the maximum (`curvature.curvature_sds`)."""
-    step = np.array([1e-2, 1e-2, 1e-3] + [1e-2] * (h.size - 3))
-    sd = curvature_sds(lambda p: -log_hyper_posterior(lin, p), h, step)
-    if sd is not None:
-        return sd
-    return np.array([0.3, 0.3, 1.0 / math.sqrt(2 * lin.n)] + [0.1] * (h.size - 3))
