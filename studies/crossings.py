@@ -417,6 +417,8 @@ def run_study(args, argv) -> dict:
     wanted = [(g, k) for k in range(args.crossings) for g in range(args.girders)]
     if args.only_girder is not None:
         wanted = [(g, k) for g, k in wanted if g == args.only_girder]
+    if args.reverse:
+        wanted.reverse()
     records = []
     t_start = time.monotonic()
     for g, k in wanted:
@@ -762,6 +764,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exeter-check", action="store_true")
     p.add_argument("--skip-family", action="store_true", help="only --joint / --exeter-check")
     p.add_argument("--resume", action="store_true")
+    p.add_argument(
+        "--reverse", action="store_true",
+        help="run the crossings last first: with --resume, a second process shares the study",
+    )  # fmt: skip
     p.add_argument(
         "--max-minutes", type=float, default=0, help="start no crossing after this (0: no limit)"
     )

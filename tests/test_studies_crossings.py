@@ -100,3 +100,34 @@ def test_nuisance_summary_separates_misses_that_follow_the_speed(study):
     )
     assert calm["speed_within"] == 4 and calm["EI_rms_z_speed_beyond"] is None
     assert abs(calm["corr_EI_speed"]) < 0.3
+
+
+def test_reverse_runs_the_crossings_last_first_and_resume_skips_done_ones(
+    study, tmp_path, monkeypatch
+):
+    """Two processes share a study, one each way: `--reverse` runs the last crossing first, and with
+    `--resume` a crossing whose record exists is not run again (the negative control: without `--resume`
+    every crossing runs)."""
+    ran = []
+
+    def fake(args, argv, g, k):
+        ran.append((g, k))
+        return {
+            "schema": study.RECORD_SCHEMA,
+            "fingerprint": study.fingerprint(args),
+            "g": g,
+            "k": k,
+        }
+
+    monkeypatch.setattr(study, "run_crossing", fake)
+    monkeypatch.setattr(study, "write_study", lambda *a, **k: {})
+    argv = ["--girders", "2", "--crossings", "3", "--only-girder", "1", "--out", str(tmp_path)]
+    study.run_study(study.build_parser().parse_args([*argv, "--reverse"]), argv)
+    assert ran == [(1, 2), (1, 1), (1, 0)]
+    (tmp_path / "crossings" / "g1-c1.json").unlink()
+    ran.clear()
+    study.run_study(study.build_parser().parse_args([*argv, "--resume"]), argv)
+    assert ran == [(1, 1)]
+    ran.clear()
+    study.run_study(study.build_parser().parse_args(argv), argv)
+    assert ran == [(1, 0), (1, 1), (1, 2)]
