@@ -1,26 +1,23 @@
 """The linearised crossing posterior's hyperparameters h = (log s, log l, log sigma and, for sprung
 vehicles, the suspension's): their log posterior under the linearisation (exact evidence, `linearised`),
 its maximum, the curvature's sds there, and their sampler, adaptive multiple importance sampling
-(`importance.amis`) with emcee as the caller's fallback."""
+(`importance.amis`) with emcee as the caller's fallback. Every function takes `lin`, a `linearised.Linearisation` (not imported here:
+`linearised` imports this module)."""
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .curvature import curvature_sds
-
-if TYPE_CHECKING:
-    from .linearised import Linearisation
 
 #: the importance sampler: draws of its first proposal's guide (about the maximum, with the curvature's
 #: sds) and the rows its equal-weight draws are laid out in (a layout, not chains)
 HYPER_GUIDE, HYPER_CHAINS = 2000, 4
 
 
-def hyper_maximum(lin: Linearisation, start: np.ndarray) -> np.ndarray:
+def hyper_maximum(lin, start: np.ndarray) -> np.ndarray:
     """The hyperparameters' maximum of log prior + log evidence under the linearisation."""
     from scipy.optimize import minimize
 
@@ -34,7 +31,7 @@ def hyper_maximum(lin: Linearisation, start: np.ndarray) -> np.ndarray:
     return res.x if res.fun < f(start) else np.asarray(start, float)
 
 
-def log_hyper_posterior(lin: Linearisation, hyper: np.ndarray) -> np.ndarray:
+def log_hyper_posterior(lin, hyper: np.ndarray) -> np.ndarray:
     """log p(h) + log p_lin(y | h) (the priors of `likelihood.CrossingsLogPosterior` on h)."""
     hyper = np.atleast_2d(hyper)
     full = np.repeat(lin.theta[None], hyper.shape[0], 0)
@@ -47,7 +44,7 @@ def log_hyper_posterior(lin: Linearisation, hyper: np.ndarray) -> np.ndarray:
     return out
 
 
-def hyper_importance(lin: Linearisation, h: np.ndarray, scale: np.ndarray, seed, progress):
+def hyper_importance(lin, h: np.ndarray, scale: np.ndarray, seed, progress):
     """The hyperparameters' linearised posterior by adaptive multiple importance sampling
     (`importance.amis`) from a multivariate t about their maximum h with the curvature's sds `scale`.
     The density is exact and cheap and has three to six dimensions, so a few rounds of a few hundred
@@ -72,7 +69,7 @@ def hyper_importance(lin: Linearisation, h: np.ndarray, scale: np.ndarray, seed,
     return ch, info
 
 
-def conditional_sd(lin: Linearisation, h: np.ndarray) -> np.ndarray:
+def conditional_sd(lin, h: np.ndarray) -> np.ndarray:
     """theta's conditional sds given h, from 64 conditional draws (zero for the hyperparameters)."""
     rng = np.random.default_rng(0)
     d = lin.conditional(np.repeat(h[None], 64, 0), rng)
@@ -81,7 +78,7 @@ def conditional_sd(lin: Linearisation, h: np.ndarray) -> np.ndarray:
     return sd
 
 
-def hyper_scale(lin: Linearisation, h: np.ndarray) -> np.ndarray:
+def hyper_scale(lin, h: np.ndarray) -> np.ndarray:
     """sds of h from the curvature of its log posterior at the maximum (`curvature.curvature_sds`)."""
     step = np.array([1e-2, 1e-2, 1e-3] + [1e-2] * (h.size - 3))
     sd = curvature_sds(lambda p: -log_hyper_posterior(lin, p), h, step)
