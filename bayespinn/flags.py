@@ -7,14 +7,7 @@ import argparse
 import sys
 
 from .errors import InputError
-from .options import (
-    BPINN_VARIANTS,
-    EXECUTORS,
-    NOISE_PRIORS,
-    PROFILES,
-    int_at_least,
-    resolve_device,
-)
+from .options import check_choices, int_at_least, resolve_device
 
 
 class UsageError(InputError):
@@ -76,12 +69,5 @@ def add_method_flags(p: argparse.ArgumentParser) -> None:
 
 def check_method_flags(args) -> None:
     """InputError naming the flag for a bad profile, B-PINN variant, noise prior, executor or device."""
-    if getattr(args, "profile", "fast") not in PROFILES:
-        raise InputError("--profile", args.profile, "smoke, fast or paper")
-    if getattr(args, "bpinn_variant", "auto") not in BPINN_VARIANTS:
-        raise InputError("--bpinn-variant", args.bpinn_variant, "auto, last-layer or full")
-    if getattr(args, "noise_prior", "vague") not in NOISE_PRIORS:
-        raise InputError("--noise-prior", args.noise_prior, "vague or snr")
-    if getattr(args, "executor", "local") not in EXECUTORS:
-        raise InputError("--executor", args.executor, "local or ray")
+    check_choices(args)
     resolve_device(getattr(args, "device", "auto"))

@@ -76,10 +76,9 @@ def resolve_device(name: str) -> str:
     return "cuda" if has else "cpu"
 
 
-def config_from_args(args) -> Config:
-    """Check the common flags of a parsed command line and resolve its configuration (preset < TOML)."""
-    if args.case not in CASES:
-        raise InputError("--case", args.case, "deflection or strain")
+def check_choices(args) -> None:
+    """InputError naming the flag for a bad profile, B-PINN variant, noise prior or executor (flags a
+    command does not have are skipped)."""
     if getattr(args, "profile", "fast") not in PROFILES:
         raise InputError("--profile", args.profile, "smoke, fast or paper")
     if getattr(args, "bpinn_variant", "auto") not in BPINN_VARIANTS:
@@ -88,6 +87,13 @@ def config_from_args(args) -> Config:
         raise InputError("--noise-prior", args.noise_prior, "vague or snr")
     if getattr(args, "executor", "local") not in EXECUTORS:
         raise InputError("--executor", args.executor, "local or ray")
+
+
+def config_from_args(args) -> Config:
+    """Check the common flags of a parsed command line and resolve its configuration (preset < TOML)."""
+    if args.case not in CASES:
+        raise InputError("--case", args.case, "deflection or strain")
+    check_choices(args)
     cfg = resolve(args.case, args.config)  # first: a bad input is told before torch is imported
     resolve_device(getattr(args, "device", "auto"))
     return cfg
