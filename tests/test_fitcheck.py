@@ -15,7 +15,7 @@ from scipy import stats
 
 import bayespinn as bp
 from bayespinn.config import Axle, Vehicle
-from bayespinn.uq import fitcheck
+from bayespinn.uq import fitcheck, fitcheck_text
 from bayespinn.uq.posterior import Posterior
 
 #: false-failure rate of the statistical tests below
@@ -219,7 +219,7 @@ def test_p_values_carry_their_monte_carlo_resolution():
     assert fc["p_values"]["smooth_structure"] == pytest.approx(1 / (B + 1))
     assert f"p < 1/{B + 1}" in fc["detail"] and "0.001" not in fc["detail"]
     assert 0 < fc["p_value_se"] < 0.01
-    assert fitcheck.p_text(0.25) == "p = 0.25"
+    assert fitcheck_text.p_text(0.25, B) == "p = 0.25"
 
 
 def test_hat_directions_recover_a_linear_fit():

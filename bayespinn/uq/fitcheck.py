@@ -39,6 +39,7 @@ import numpy as np
 
 from ..data.measurements import Measurements
 from . import fitcheck_stats as fs
+from .fitcheck_text import detail, statistic_text
 
 log = logging.getLogger(__name__)
 
@@ -54,15 +55,6 @@ TIMING_DRAWS = 32
 TIME_STEP = 1e-3
 #: the reasons a misfit can name, in the order a user should act on them
 REASONS = ("smooth_structure", "serial_correlation", "one_sensor")
-#: what each band of smooth structure points to, and what to do (the detail's words)
-SMOOTH_CAUSES = {
-    "timing": "it has the shape of the response shifted or stretched in time, as a stated speed or entry "
-    "time that is off leaves (declare their uncertainty: [vehicle] speed_sd, entry_time_sd)",
-    "mid": "it varies at a vehicle's bounce frequencies, as dynamic axle forces leave (declare them: "
-    '[model] axle_forces = "fluctuating")',
-    "low": "it varies at the crossing's own time scale, as a support, a stiffness or a load the model "
-    "lacks leaves (change the model: springs at the supports, EI per segment)",
-}
 
 
 def prediction_draws(
@@ -149,17 +141,6 @@ def crossings_of(data: Measurements) -> np.ndarray | None:
         return None
     c = np.asarray(c).astype(str)
     return c if np.unique(c).size > 1 else None
-
-
-def p_text(p: float, replicates: int = REPLICATES, floor: float | None = None) -> str:
-    """A p-value as a reader should take it: at the Monte Carlo floor of one statistic, 'p < 1/(n + 1)';
-    at the floor of a combination of several (k of the n + 1 values share it), 'p <= k/(n + 1)'."""
-    one = 1.0 / (replicates + 1)
-    if p <= one * (1 + 1e-9):
-        return f"p < 1/{replicates + 1}"
-    if floor is not None and p <= floor * (1 + 1e-9):
-        return f"p <= {round(p * (replicates + 1))}/{replicates + 1}, its floor"
-    return f"p = {p:.2g}"
 
 
 class _Statistics:
@@ -263,7 +244,9 @@ def check(
     out = {
         "verdict": verdict,
         "p_value": combined,
-        "statistic": _statistic_text(st, rho_fit is not None, len(crossings), n_basis, n_timing),
+        "statistic": statistic_text(
+            list(st.values), rho_fit is not None, len(crossings), n_basis, n_timing, B, FALSE_ALARM
+        ),
         "residual_autocorr": rho1,
         "reasons": reasons,
         "detail": "",
@@ -298,7 +281,7 @@ def check(
             out["p_values"]["worst_crossing"] = float(
                 min(p[r + "@worst"] for r in REASONS if r + "@worst" in p)
             )
-    out["detail"] = _detail(out)
+    out["detail"] = detail(out)
     return out
 
 
@@ -357,102 +340,3 @@ def _by_crossing(P, names, crossings, st) -> dict:
             "reasons": reasons if pc < FALSE_ALARM else [],
         }
     return out
-
-
-def _statistic_text(
-    st: _Statistics, ar1: bool, n_crossings: int, n_basis: int, n_timing: int
-) -> str:
-    parts = [
-        f"energy in {n_basis} smooth functions of time (and position, for scattered points) and in "
-        f"{n_timing} directions of the response shifted or stretched in time, by band",
-        "the lag-1 autocorrelation"
-        if not ar1
-        else f"the autocorrelations at lags 1 to {fs.LAGS} of the whitened residuals",
-    ]
-    if any(k.startswith("one_sensor") for k in st.values):
-        parts.append("the largest ratio of one sensor's residual variance to the others'")
-    noise = "AR(1) noise at its fitted coefficient" if ar1 else "white noise"
-    per = f", for all the data and the worst of {n_crossings} crossings" if n_crossings > 1 else ""
-    return (
-        "residuals at the posterior mean prediction against a parametric bootstrap of the fitted model "
-        f"({REPLICATES} replicates of {noise}, less what the fit absorbs): "
-        + "; ".join(parts)
-        + per
-        + f"; combined by min-p, misfit below {FALSE_ALARM:g}"
-    )
-
-
-def _detail(fc: dict) -> str:
-    """One sentence (or two) saying what the residuals contradict and what to do about it."""
-    B = fc["replicates"]
-    pv = fc["p_values"]
-    noise = (
-        f"AR(1) noise with coefficient {fc['noise_ar1']:.2f}"
-        if fc["null"] == "ar1"
-        else "white noise"
-    )
-    if fc["verdict"] == "fits":
-        text = (
-            f"The residuals are what {noise} leaves after the fit: no smooth structure, serial "
-            f"correlation or single sensor beyond {B} simulated replicates of the fitted model "
-            f"(combined {p_text(fc['p_value'], B, fc['p_value_floor'])})."
-        )
-    else:
-        parts = []
-        for r in fc["reasons"]:
-            if r == "smooth_structure":
-                bands = fc.get("smooth_bands") or {}
-                hits = [b for b in ("timing", "mid", "low") if bands.get(b, 1.0) < FALSE_ALARM]
-                causes = [SMOOTH_CAUSES[b] for b in hits] or [SMOOTH_CAUSES["low"]]
-                parts.append(
-                    "the residuals keep smooth structure "
-                    f"({p_text(pv.get(r, fc['p_value']), B)}) that {noise} cannot leave: "
-                    + "; or ".join(causes)
-                )
-            elif r == "serial_correlation":
-                also = "smooth_structure" in fc["reasons"]
-                what = (
-                    "consecutive residuals are correlated (lag-1 autocorrelation "
-                    f"{fc['residual_autocorr']:+.2f}, {p_text(pv.get(r, fc['p_value']), B)})"
-                    if fc["null"] == "white"
-                    else "the whitened residuals stay correlated over several samples "
-                    f"({p_text(pv.get(r, fc['p_value']), B)})"
-                )
-                fix = (
-                    'analyse with [model] noise = "ar1" if the records are filtered or smoothed'
-                    if fc["null"] == "white"
-                    else "the noise is correlated beyond what AR(1) describes (records filtered "
-                    "over several samples)"
-                )
-                parts.append(
-                    f"{what}, as the smooth structure leaves; if it stays once that is explained, {fix}"
-                    if also
-                    else f"{what}: {fix}"
-                )
-            elif r.startswith("one_sensor:"):
-                ws = fc.get("worst_sensor") or {}
-                ratio = (
-                    f" ({ws['variance_ratio']:.1f} times the others' residual variance)"
-                    if ws.get("name") == r.split(":", 1)[1]
-                    else ""
-                )
-                parts.append(
-                    f"sensor {r.split(':', 1)[1]} is much worse than the rest{ratio}: check its "
-                    "calibration, position and fixing, or leave it out"
-                )
-            elif r.startswith("crossing:"):
-                c = r.split(":", 1)[1]
-                pc = fc["by_crossing"][c]["p_value"]
-                parts.append(f"crossing {c} fits worst ({p_text(pc, B)})")
-        text = (
-            f"The data contradict the model (combined {p_text(fc['p_value'], B, fc['p_value_floor'])}): "
-            + "; ".join(parts)
-            + "."
-        )
-    if "worst_crossing" in fc and not any(r.startswith("crossing:") for r in fc["reasons"]):
-        c = fc["worst_crossing"]
-        text += (
-            f" Of {len(fc['by_crossing'])} crossings, {c} fits worst "
-            f"({p_text(fc['by_crossing'][c]['p_value'], B)})."
-        )
-    return text
