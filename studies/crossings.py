@@ -529,6 +529,7 @@ def exeter_check() -> dict:
     """`bayespinn run` of the exeter-snr20-seed11 record's command, modal only, against its modal EI."""
     import subprocess
     import tempfile
+    import time
 
     root = Path(__file__).resolve().parents[1]
     summ = json.loads((root / "reports/records/exeter-snr20-seed11/summary.json").read_text())
@@ -536,7 +537,9 @@ def exeter_check() -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         cmd = ["bayespinn", "run", "--snr", "20", "--method", "modal", "--seed", "11",
                "--out", tmp, "--quiet"]  # fmt: skip
+        t0 = time.perf_counter()
         subprocess.run([sys.executable, "-m", "bayespinn", *cmd[1:]], check=True, cwd=root)
+        runtime = time.perf_counter() - t0
         new = json.loads((Path(tmp) / "summary.json").read_text())["methods"]["modal_mcmc"]["EI"]
     shift = (new["mean"] - ref["mean"]) / ref["sd"]
     return {
@@ -547,6 +550,7 @@ def exeter_check() -> dict:
         "fresh_sd": new["sd"],
         "shift_in_record_sd": shift,
         "within": abs(shift) <= 0.3,
+        "runtime_s": runtime,
         **c.replicate_provenance(),
     }
 

@@ -32,12 +32,14 @@ PY = sys.executable
 
 @dataclass(frozen=True)
 class Job:
-    """One command that rewrites `record`; `fresh`: files removed before its first start."""
+    """One command that rewrites `record` (only its entry `key`, when given); `fresh`: files removed before
+    its first start."""
 
     name: str
     command: tuple[str, ...]
     record: str
     fresh: tuple[str, ...] = field(default=())
+    key: str | None = None
 
 
 def _load(rel: str) -> dict:
@@ -195,6 +197,16 @@ def _study_jobs() -> list[Job]:
             (f"{PAPER}/crossings/study.json", *crossings),
         )
     )  # fmt: skip
+    # after it (it starts study.json afresh): the joint analyses and the Exeter check, entries of that file
+    study = f"{PAPER}/crossings/study.json"
+    crossing = (PY, "studies/crossings.py", "--girders", "3", "--crossings", "10", "--skip-family")
+    for g in range(3):
+        key = "joint" if g == 0 else f"joint_g{g}"
+        joint = ("--joint", "10", "--joint-girder", str(g), "--out", PAPER)
+        out.append(Job(f"crossings-joint-g{g}", (*crossing, *joint), study, key=key))
+    out.append(
+        Job("crossings-exeter-check", (*crossing, "--exeter-check", "--out", PAPER), study, key="exeter_check")
+    )  # fmt: skip
     for t in ("table4", "table6", "table5"):  # table5 reads table4's run folders
         out.append(
             Job(
@@ -254,6 +266,11 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
     if not (ROOT / job.record).is_file():
         return None, "its record is not there (a re-run started it afresh)"
     doc = _load(job.record)
+    if job.key is not None:
+        entry = doc.get(job.key) or {}
+        if entry.get("runtime_s") is None:
+            return None, f"not recorded (its entry {job.key} has no run time)"
+        return float(entry["runtime_s"]), "its run time"
     if job.record.endswith("summary.json"):
         man = _load(job.record.replace("summary.json", "manifest.json"))
         return float(man["timings_s"]["total_s"]), "its analysis time"
@@ -277,11 +294,14 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
         folder = (
             ROOT / job.record
         ).parent  # a study that names its records: one file each beside it
+        ids = [
+            r if isinstance(r, str) else r.get("id") if isinstance(r, dict) else None for r in recs
+        ]
         recs = [
-            _load(str((folder / f"{r}.json").relative_to(ROOT)))
-            if isinstance(r, str) and (folder / f"{r}.json").is_file()
+            _load(str((folder / f"{i}.json").relative_to(ROOT)))
+            if i and (folder / f"{i}.json").is_file()
             else r
-            for r in recs
+            for i, r in zip(ids, recs, strict=True)
         ]
         t = sum(
             float(r.get("time_s") or 0.0)  # a crossing record: its simulation and both analyses

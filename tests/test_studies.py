@@ -523,3 +523,30 @@ def test_rerun_lists_every_cited_study_with_its_expected_time():
     )  # fmt: skip
     assert bad.returncode == 2 and "no-such-study" in bad.stderr and "Traceback" not in bad.stderr
     assert (state.read_text(encoding="utf-8") if state.exists() else None) == before  # no state
+
+
+def test_rerun_re_runs_the_crossing_entries_after_the_crossings_study():
+    """The crossings study starts its study.json afresh, so the joint analyses and the Exeter check (entries
+    of that file) are jobs of their own after it, each expected to take its entry's recorded run time; the
+    crossings study itself is expected to take the sum of its crossing records' times (its study.json lists
+    them by id)."""
+    sys.path.insert(0, str(REPO / "studies"))
+    import rerun
+
+    jobs = rerun.jobs()
+    names = [j.name for j in jobs]
+    i = names.index("crossings")
+    after = [
+        "crossings-joint-g0",
+        "crossings-joint-g1",
+        "crossings-joint-g2",
+        "crossings-exeter-check",
+    ]
+    assert names[i + 1 : i + 5] == after
+    study = json.loads((REPO / jobs[i].record).read_text(encoding="utf-8"))
+    for job in jobs[i + 1 : i + 5]:
+        assert job.record == jobs[i].record and "--skip-family" in job.command
+        seconds, _ = rerun.expected_seconds(job)
+        assert seconds == (study.get(job.key) or {}).get("runtime_s")
+    total, how = rerun.expected_seconds(jobs[i])
+    assert total > 3600 and "replicates" in how  # 30 analysed crossings, minutes each
