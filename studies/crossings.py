@@ -708,6 +708,13 @@ def write_page(out: Path, doc: dict) -> None:
                     if j.get("crossing_error")
                     else ""
                 )
+                + (
+                    " Not converged: "
+                    + "; ".join(j.get("problems") or ["a sampler missed its checks"])
+                    + "."
+                    if j.get("converged") is False
+                    else ""
+                )
             )
         )
     if not joints:
