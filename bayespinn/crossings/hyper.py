@@ -1,8 +1,8 @@
 """The linearised crossing posterior's hyperparameters h = (log s, log l, log sigma and, for sprung
 vehicles, the suspension's): their log posterior under the linearisation (exact evidence, `linearised`),
 its maximum, the curvature's sds there, and their sampler, adaptive multiple importance sampling
-(`importance.amis`) with emcee as the caller's fallback. Every function takes `lin`, a `linearised.Linearisation` (not imported here:
-`linearised` imports this module)."""
+(`importance.amis`) with emcee as the caller's fallback. Every function takes `lin`, a
+`linearised.Linearisation` (not imported here: `linearised` imports this module)."""
 
 from __future__ import annotations
 
