@@ -201,6 +201,7 @@ def _study_jobs() -> list[Job]:
     study = f"{PAPER}/crossings/study.json"
     crossing = (PY, "studies/crossings.py", "--girders", "3", "--crossings", "10", "--skip-family")
     for g in range(3):
+        # the study's own naming, crossings.joint_key (not imported here: that module loads torch)
         key = "joint" if g == 0 else f"joint_g{g}"
         joint = ("--joint", "10", "--joint-girder", str(g), "--out", PAPER)
         out.append(Job(f"crossings-joint-g{g}", (*crossing, *joint), study, key=key))
