@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from bayespinn.crossings.combine import combine
+from bayespinn.methods import REFERENCE_KEY
 from bayespinn.uq.coverage import binomial_acceptance
 from bayespinn.uq.priors import EIPrior
 
@@ -127,8 +128,12 @@ def test_combined_crossings_agree_with_one_model_of_them():
         "crossing": [{"name": f"c{i}", "speed": 1.005 * sp} for i, sp in enumerate(speeds)],
     }
     cfg = bp.resolve("deflection", toml)
-    one = crossings_reference(data, cfg, seed=0, settings=settings, fit_checks=False).summary()
-    comb = crossings_reference(data, cfg, seed=0, settings=settings, combine=True)
+    one = crossings_reference(
+        data, cfg, seed=0, settings=settings, fit_checks=False, method=REFERENCE_KEY
+    ).summary()
+    comb = crossings_reference(
+        data, cfg, seed=0, settings=settings, combine=True, method=REFERENCE_KEY
+    )
     two = comb.summary()
     assert "crossing_error" in two
     assert abs(two["EI"]["mean"] - one["EI"]["mean"]) < 0.5 * one["EI"]["sd"]

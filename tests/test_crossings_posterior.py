@@ -15,6 +15,7 @@ import bayespinn as bp
 from bayespinn import seeding
 from bayespinn.crossings import crossings_reference
 from bayespinn.data.measurements import Measurements
+from bayespinn.methods import REFERENCE_KEY
 from bayespinn.physics.fem import FEBeam, FESettings, fe_response
 from bayespinn.uq.sampler import MCMCSettings
 
@@ -67,7 +68,7 @@ def test_speed_and_entry_time_recovered_and_todays_model_is_biased():
     declared = dataclasses.replace(
         declared, vehicle=dataclasses.replace(declared.vehicle, entry_time_sd=0.1)
     )
-    ref = crossings_reference(data, declared, seed=0, settings=SETTINGS)
+    ref = crossings_reference(data, declared, seed=0, settings=SETTINGS, method=REFERENCE_KEY)
     s = ref.summary({"EI": cfg.beam.EI, "speed": v, "entry_time": LEAD})
     assert abs(_z(s["EI"], cfg.beam.EI)) < Z_BAND
     assert abs(_z(s["speed"], v)) < Z_BAND
@@ -77,9 +78,9 @@ def test_speed_and_entry_time_recovered_and_todays_model_is_biased():
     exact = dataclasses.replace(
         declared, vehicle=dataclasses.replace(declared.vehicle, speed_sd=0.0, entry_time_sd=0.0)
     )
-    biased = crossings_reference(data, exact, seed=0, settings=SETTINGS).summary(
-        {"EI": cfg.beam.EI}
-    )
+    biased = crossings_reference(
+        data, exact, seed=0, settings=SETTINGS, method=REFERENCE_KEY
+    ).summary({"EI": cfg.beam.EI})
     assert abs(_z(biased["EI"], cfg.beam.EI)) > 4.0
 
 
@@ -127,7 +128,7 @@ def _fluctuating_crossing():
 @pytest.mark.study  # about 17 minutes on 2 shared cores: run with -m study, outside CI's slow tier
 def test_fluctuating_forces_hold_the_truth_where_constant_forces_miss():
     cfg, data, fl = _fluctuating_crossing()
-    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
+    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS, method=REFERENCE_KEY)
     s = ref.summary({"EI": cfg.beam.EI})
     assert abs(_z(s["EI"], cfg.beam.EI)) < Z_BAND
     assert 0.01 < s["axle_force_sd"]["mean"] < 0.2
@@ -158,7 +159,7 @@ def test_a_failed_linearisation_is_replaced_by_the_exact_posterior(monkeypatch):
     monkeypatch.setattr(linearised, "ESS_MIN_FRACTION", 1.01)
     monkeypatch.setattr(resonance, "MODES", 0)
     cfg, data, fl = _fluctuating_crossing()
-    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
+    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS, method=REFERENCE_KEY)
     d = ref.diagnostics
     assert d["importance"]["passed"] and d["converged"] and not d["problems"]
     lin = d["linearisation"]
@@ -180,7 +181,7 @@ def test_an_importance_sampler_that_fails_its_check_is_not_converged(monkeypatch
     monkeypatch.setattr(importance, "ESS_TARGET", 1e9)
     cfg, data, fl = _fluctuating_crossing()
     with pytest.warns(RuntimeWarning, match="importance sampling"):
-        ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
+        ref = crossings_reference(data, fl, seed=0, settings=SETTINGS, method=REFERENCE_KEY)
     assert ref.diagnostics["converged"] is False
     assert any("importance sampling" in p for p in ref.diagnostics["problems"])
 
@@ -202,14 +203,16 @@ def test_several_crossings_shrink_the_sd():
         "crossing": [{"name": f"c{i}", "speed": sp} for i, sp in enumerate(stated)],
     }
     cfg = bp.resolve("deflection", toml)
-    joint = crossings_reference(data, cfg, seed=0, settings=SETTINGS).summary({"EI": base.beam.EI})
+    joint = crossings_reference(data, cfg, seed=0, settings=SETTINGS, method=REFERENCE_KEY).summary(
+        {"EI": base.beam.EI}
+    )
     one_cfg = bp.resolve(
         "deflection", {"vehicle": {"speed": stated[1], "speed_sd": 0.02, "entry_time_sd": 0.02}}
     )
     one_data = parts[1]
-    one = crossings_reference(one_data, one_cfg, seed=0, settings=SETTINGS).summary(
-        {"EI": base.beam.EI}
-    )
+    one = crossings_reference(
+        one_data, one_cfg, seed=0, settings=SETTINGS, method=REFERENCE_KEY
+    ).summary({"EI": base.beam.EI})
     assert abs(_z(joint["EI"], base.beam.EI)) < Z_BAND
     assert joint["EI"]["sd"] < 0.75 * one["EI"]["sd"]
     assert set(joint["crossings"]) == {"c0", "c1", "c2"}
@@ -240,10 +243,13 @@ def test_laplace_marginalisation_matches_brute_force_emcee():
         "crossing": [{"name": f"c{i}", "speed": 1.005 * sp} for i, sp in enumerate(speeds)],
     }
     cfg = bp.resolve("deflection", toml)
-    lap = crossings_reference(data, cfg, seed=0, settings=SETTINGS, fit_checks=False)
+    lap = crossings_reference(
+        data, cfg, seed=0, settings=SETTINGS, fit_checks=False, method=REFERENCE_KEY
+    )
     brute = crossings_reference(
         data, cfg, seed=1, laplace=False, fit_checks=False,
         settings=MCMCSettings(n_walkers=24, n_groups=2, tau_factor=60.0, min_steps=2000),
+        method=REFERENCE_KEY,
     )  # fmt: skip
     a, b = lap.summary(), brute.summary()
     assert "laplace" in a["diagnostics"] and "laplace" not in b["diagnostics"]
@@ -281,7 +287,7 @@ def test_the_hyperparameters_importance_draws_match_emcee(monkeypatch):
 
     monkeypatch.setattr(linearised, "linearised_sample", spy)
     cfg, data, fl = _fluctuating_crossing()
-    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
+    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS, method=REFERENCE_KEY)
     assert seen["extra"]["linearisation"]["hyper_sampler"] == "importance"
     assert ref.diagnostics["converged"]
     lin = seen["lin"]
@@ -318,7 +324,7 @@ def test_hyperparameters_fall_back_to_emcee_when_importance_fails(monkeypatch):
     monkeypatch.setattr(importance, "MAX_ROUNDS", 2)
     monkeypatch.setattr(importance, "ESS_TARGET", 1e9)
     cfg, data, fl = _fluctuating_crossing()
-    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS)
+    ref = crossings_reference(data, fl, seed=0, settings=SETTINGS, method=REFERENCE_KEY)
     lin = ref.diagnostics["linearisation"]
     assert lin["hyper_sampler"] == "emcee" and not lin["hyper_importance"]["passed"]
     assert ref.diagnostics["scheme"].startswith("emcee")

@@ -15,6 +15,7 @@ import torch
 
 from bayespinn.config import resolve
 from bayespinn.data.synthetic import simulate
+from bayespinn.methods import REFERENCE_KEY
 from bayespinn.uq import girder_net as N
 from bayespinn.uq import girder_pinn as G
 from bayespinn.uq.girder_reference import girder_reference
@@ -175,7 +176,7 @@ def _check(post, ref, S):
 @pytest.fixture(scope="module")
 def reference(damaged):
     cfg, data = damaged
-    return girder_reference(data, cfg, seed=np.random.SeedSequence(11))
+    return girder_reference(data, cfg, seed=np.random.SeedSequence(11), method=REFERENCE_KEY)
 
 
 def test_importance_sampler_draws_until_its_effective_sample_size_target(last_layer, monkeypatch):
@@ -252,7 +253,11 @@ def ar1_damaged():
         },
     )
     data = simulate(cfg, 20.0, seed=3)
-    return cfg, data, girder_reference(data, cfg, seed=np.random.SeedSequence(11))
+    return (
+        cfg,
+        data,
+        girder_reference(data, cfg, seed=np.random.SeedSequence(11), method=REFERENCE_KEY),
+    )
 
 
 def test_ar1_last_layer_batched_equals_the_single_one_and_whitens(ar1_damaged):

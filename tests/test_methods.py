@@ -249,6 +249,45 @@ def test_the_cycle_finder_finds_a_cycle():
     )
 
 
+def _string_literals(sources: dict[str, str], text: str) -> list[str]:
+    """The modules whose source has `text` as a string constant (docstrings and comments aside)."""
+    out = []
+    for name, src in sources.items():
+        tree = ast.parse(src)
+        docs = {
+            id(n.body[0].value)
+            for n in ast.walk(tree)
+            if isinstance(n, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+            and n.body
+            and isinstance(n.body[0], ast.Expr)
+            and isinstance(n.body[0].value, ast.Constant)
+        }
+        if any(
+            isinstance(n, ast.Constant) and n.value == text and id(n) not in docs
+            for n in ast.walk(tree)
+        ):
+            out.append(name)
+    return sorted(out)
+
+
+def test_the_reference_key_is_written_only_in_the_modal_method():
+    """Everything else finds the reference through the registry (`methods.REFERENCE_KEY`)."""
+    sources = {n: p.read_text(encoding="utf-8") for n, p in _modules().items()}
+    assert _string_literals(sources, methods.REFERENCE_KEY) == ["bayespinn.methods.modal"]
+    assert methods.REFERENCE_KEY == methods.reference_key() == methods.get("modal").key
+
+
+def test_the_literal_finder_finds_a_planted_literal():
+    """Negative control: the key written into another module is found; in a docstring it is not."""
+    sources = {n: p.read_text(encoding="utf-8") for n, p in _modules().items()}
+    sources["bayespinn.uq.posterior"] += f"\nKEY = {methods.REFERENCE_KEY!r}\n"
+    sources["bayespinn.uq.agreement"] += f"\n\ndef f():\n    {methods.REFERENCE_KEY!r}\n"
+    assert _string_literals(sources, methods.REFERENCE_KEY) == [
+        "bayespinn.methods.modal",
+        "bayespinn.uq.posterior",
+    ]
+
+
 #: each method's own modules: the class and what computes it
 FAMILIES = {
     "modal": {"bayespinn.methods.modal", "bayespinn.uq.modal_mcmc"},

@@ -9,6 +9,7 @@ from scipy import stats
 
 from bayespinn.config import preset
 from bayespinn.data.synthetic import simulate
+from bayespinn.methods import REFERENCE_KEY
 from bayespinn.options import RunOptions
 from bayespinn.physics.modal import ModalModel
 from bayespinn.uq.coverage import binomial_acceptance, coverage_study, paired_with_reference
@@ -102,7 +103,9 @@ def test_modal_posterior_matches_quadrature(case, snr, request):
     sampled through the Chebyshev interpolant of the likelihood (`ModalLikelihood.interpolate`)."""
     cfg = request.getfixturevalue("exeter" if case == "deflection" else "exeter_strain")
     data = simulate(cfg, snr, 5)
-    p = modal_posterior(data, cfg, noise_prior=NoisePrior.build("vague", data.value), seed=5)
+    p = modal_posterior(
+        data, cfg, noise_prior=NoisePrior.build("vague", data.value), seed=5, method=REFERENCE_KEY
+    )
     if case == "strain":
         assert p.diagnostics["interpolation"]["used"]
     mean, sd = _grid_posterior(cfg, data)
@@ -123,6 +126,7 @@ def test_snr_noise_prior_runs_2d(exeter):
         noise_prior=NoisePrior.build("snr", data.value, 20.0),
         seed=2,
         settings=MCMCSettings.for_profile("smoke"),
+        method=REFERENCE_KEY,
     )
     assert "log sigma" in p.diagnostics["scheme"]
     true_sigma = np.sqrt(np.mean(data.value_true**2) / 100.0)

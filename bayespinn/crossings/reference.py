@@ -19,6 +19,7 @@ with a crossing-level error (`combine`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import time
 import warnings
@@ -29,7 +30,6 @@ from scipy.optimize import minimize
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
-from ..methods.reference import REFERENCE_KEY
 from ..threads import one_blas_thread
 from ..uq.posterior import mcmc_diagnostics
 from ..uq.priors import EIPrior, NoisePrior, prior_only
@@ -59,6 +59,7 @@ def crossings_reference(
     fit_checks: bool = True,
     laplace: bool | None = None,
     combine: bool | None = None,
+    method: str,
 ) -> CrossingsReference:
     """The reference posterior of EI and of what the crossings leave uncertain (module docstring).
 
@@ -67,13 +68,14 @@ def crossings_reference(
         every parameter (the brute force it is checked against).
     combine : analyse each crossing on its own and combine EI through a crossing-level error
         (`crossings.combine`); None: with several crossings and fluctuating forces. False: one model of
-        every crossing, the force law, damping and noise shared."""
+        every crossing, the force law, damping and noise shared.
+    method : the summary key the posterior is labelled with (the reference's, `methods.REFERENCE_KEY`)."""
     from .predictor import CrossingsPredictor, crossing_fit_checks
 
     t_start = time.perf_counter()
     check_crossings(cfg, data)
     if len(data) == 0:
-        return prior_only(EIPrior.from_spec(cfg.prior), seed, t_start)
+        return prior_only(EIPrior.from_spec(cfg.prior), seed, t_start, method)
     s = settings or MCMCSettings()
     m = cfg.model
     forces = m.axle_forces == "fluctuating"
@@ -83,7 +85,12 @@ def crossings_reference(
         from .combine import combined_reference
 
         return combined_reference(
-            data, cfg, seed=seed, settings=s, progress=progress, single=crossings_reference
+            data,
+            cfg,
+            seed=seed,
+            settings=s,
+            progress=progress,
+            single=functools.partial(crossings_reference, method=method),
         )
     damping = (
         (cfg.prior.damping_median, cfg.prior.damping_log_sd) if m.damping == "inferred" else None
@@ -266,7 +273,7 @@ def crossings_reference(
     info = {"map": {n: float(v) for n, v in zip(L.names, th, strict=True)}}
     predictor = CrossingsPredictor(cfg, data, post, flat, mean_th)
     out = CrossingsReference(
-        REFERENCE_KEY, EI, sig, diagnostics=diag, info=info, predictor=predictor,
+        method, EI, sig, diagnostics=diag, info=info, predictor=predictor,
         sample_stats=(
             {"lp": lp_is.reshape(shape)}
             if kind == "importance"

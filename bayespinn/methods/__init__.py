@@ -24,7 +24,6 @@ from __future__ import annotations
 from ..errors import InputError
 from ..options import RunOptions
 from .base import Method, Settings, check_choice, check_device
-from .reference import REFERENCE_KEY
 
 __all__ = [
     "REFERENCE_KEY",
@@ -145,3 +144,7 @@ def _builtins() -> None:
 
 
 _builtins()
+
+#: the summary key of the reference method (the modal one's, `methods.modal`), the one the others are
+#: judged against
+REFERENCE_KEY: str = reference_key()

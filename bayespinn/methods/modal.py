@@ -6,7 +6,6 @@ from dataclasses import dataclass
 
 from .. import seeding
 from .base import Method, Settings
-from .reference import REFERENCE_KEY
 
 
 @dataclass(frozen=True)
@@ -21,7 +20,7 @@ class ModalMCMC(Method):
     for the model every method shares."""
 
     name = "modal"
-    key = REFERENCE_KEY
+    key = "modal_mcmc"
     display = "Modal reference (emcee)"
     colour = "#1f5fa8"
     reference = True
@@ -85,7 +84,7 @@ class ModalMCMC(Method):
         if config.model.EI_field == "smooth":
             from ..uq.field_reference import field_reference
 
-            return field_reference(data, config, seed=seed, progress=self.progress)
+            return field_reference(data, config, seed=seed, progress=self.progress, method=self.key)
         if needs_crossings(config, data):
             return crossings_reference(
                 data,
@@ -93,12 +92,17 @@ class ModalMCMC(Method):
                 seed=seeding.stream(seed, "emcee"),
                 settings=s.mcmc or MCMCSettings.for_profile(s.profile),
                 progress=self.progress,
+                method=self.key,
             )
         if not config.ideal:
             from ..uq.girder_reference import girder_reference
 
             return girder_reference(
-                data, config, seed=seeding.stream(seed, "emcee"), progress=self.progress
+                data,
+                config,
+                seed=seeding.stream(seed, "emcee"),
+                progress=self.progress,
+                method=self.key,
             )
         return modal_posterior(
             data,
@@ -107,4 +111,5 @@ class ModalMCMC(Method):
             seed=seeding.stream(seed, "emcee"),
             settings=s.mcmc or MCMCSettings.for_profile(s.profile),
             progress=self.progress,
+            method=self.key,
         )

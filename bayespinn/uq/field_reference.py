@@ -11,7 +11,6 @@ import numpy as np
 
 from ..config import Config
 from ..data.measurements import Measurements
-from ..methods.reference import REFERENCE_KEY
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
 from ..physics.hermite import element_of
@@ -83,12 +82,11 @@ class FieldPredictor:
 
 
 def field_reference(
-    data: Measurements, cfg: Config, *, seed, progress: bool = False
+    data: Measurements, cfg: Config, *, seed, progress: bool = False, method: str
 ) -> FieldReference:
-    """The reference posterior of a smooth EI field for `cfg` given the data."""
-    return field_result(
-        REFERENCE_KEY, cfg, field_posterior(data, cfg, seed=seed, progress=progress)
-    )
+    """The reference posterior of a smooth EI field for `cfg` given the data, labelled `method` (the
+    reference's summary key)."""
+    return field_result(method, cfg, field_posterior(data, cfg, seed=seed, progress=progress))
 
 
 def field_result(

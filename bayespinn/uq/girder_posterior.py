@@ -62,7 +62,6 @@ from ..config import Beam, Vehicle, _check_number
 from ..data.girder_data import check_load_rel_sd
 from ..data.measurements import Measurements
 from ..errors import InputError
-from ..methods.reference import REFERENCE_KEY
 from ..physics.girder import Girder
 from ..threads import one_blas_thread
 from .ar1 import AR1Noise
@@ -136,7 +135,7 @@ class GirderPosterior:
     diagnostics: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
     runtime_s: float = 0.0
-    method: str = REFERENCE_KEY
+    method: str | None = None  # the summary key of the method that computed it, where one says
     #: (chain, draw) AR(1) coefficient of the noise between consecutive samples, or None (white noise)
     noise_ar1: np.ndarray | None = None
 

@@ -17,7 +17,6 @@ import numpy as np
 from ..config import Config
 from ..data.measurements import Measurements
 from ..errors import InputError
-from ..methods.reference import REFERENCE_KEY
 from ..physics.fe_modal import GirderModalModel
 from ..physics.girder import Girder
 from ..physics.loads import quantity_weights
@@ -101,9 +100,10 @@ class GirderPredictor:
 
 
 def girder_reference(
-    data: Measurements, cfg: Config, *, seed, settings=None, progress: bool = False
+    data: Measurements, cfg: Config, *, seed, settings=None, progress: bool = False, method: str
 ) -> GirderReference:
-    """The reference posterior of `cfg`'s analysis model (`[model]`, `[prior]`) given the data."""
+    """The reference posterior of `cfg`'s analysis model (`[model]`, `[prior]`) given the data, labelled
+    `method` (the reference's summary key)."""
     check_segments(cfg, data)
     m = cfg.model
     gp = girder_posterior(
@@ -124,7 +124,7 @@ def girder_reference(
     )
     info = {"EI_nominal": gp.EI_nominal, **gp.info}
     return GirderReference(
-        REFERENCE_KEY,
+        method,
         gp.EI,
         gp.sigma,
         diagnostics=gp.diagnostics,

@@ -22,7 +22,6 @@ from scipy.optimize import minimize_scalar
 from .. import seeding
 from ..config import Config
 from ..data.measurements import Measurements
-from ..methods.reference import REFERENCE_KEY
 from ..physics.loads import quantity_weights
 from ..physics.modal import ModalModel
 from .posterior import Posterior, mcmc_diagnostics
@@ -216,8 +215,10 @@ def modal_posterior(
     seed: int | np.random.SeedSequence = 0,
     settings: MCMCSettings | None = None,
     progress: bool = False,
+    method: str,
 ) -> Posterior:
-    """Sample the reference posterior of (EI, sigma) given measurements.
+    """Sample the reference posterior of (EI, sigma) given measurements, labelled `method` (the
+    reference's summary key, `methods.REFERENCE_KEY`).
 
     Returns a Posterior with draws shaped (walker, draw) over all groups, diagnostics (R-hat, bulk and
     tail ESS, autocorrelation time, steps, modes, truncation error, converged) and MAP information.
@@ -226,7 +227,7 @@ def modal_posterior(
     s = settings or MCMCSettings()
     ei_prior = EIPrior.from_spec(cfg.prior)
     if len(data) == 0:
-        return prior_only(ei_prior, seed, t0)
+        return prior_only(ei_prior, seed, t0, method)
     lik = ModalLikelihood(cfg, data, n_modes=6)
     post = LogPosterior(lik, ei_prior, noise_prior)
     le, ls, sd = post.map_estimate()
@@ -284,7 +285,7 @@ def modal_posterior(
     if not info["identified"]:
         info["note"] = "EI is not identified by these data"
     return Posterior(
-        REFERENCE_KEY,
+        method,
         EI,
         sig,
         diagnostics=diag,

@@ -14,7 +14,6 @@ import numpy as np
 from .. import seeding
 from ..config import PriorSpec
 from ..errors import InputError
-from ..methods.reference import REFERENCE_KEY
 from .posterior import Posterior
 
 NOISE_PRIORS = ("vague", "snr")
@@ -102,7 +101,7 @@ class NoisePrior:
         return f"log-normal sigma, median {self.center:.3g}, log-sd {self.log_sd}"
 
 
-def prior_only(ei_prior: EIPrior, seed, t0: float, method: str = REFERENCE_KEY) -> Posterior:
+def prior_only(ei_prior: EIPrior, seed, t0: float, method: str) -> Posterior:
     """No measurements: the posterior is the prior (exact draws); sigma is not estimable (NaN).
 
     Every method returns this when there are no data: the physics alone fixes the shape of the
