@@ -1,8 +1,9 @@
 """Diagnostic (strain case): how the ensemble members' EI marginals move with the PDE pseudo-sd.
 
-    python studies/pde_sd_sweep.py BRIDGE [--case strain] [--profile fast] [--out reports/paper/diagnostics]
+    python studies/pde_sd_sweep.py BRIDGE [--case strain] [--family-seed 0] [--profile fast]
+        [--out reports/paper/diagnostics]
 
-Bridge BRIDGE of family seed 0 at 30 dB (the family study's data seed): the modal reference, then the
+Bridge BRIDGE of family seed 0 (or `--family-seed`; never the held-out family, which chooses nothing) at 30 dB (the family study's data seed): the modal reference, then the
 deep ensemble (fast profile, 5 members, trained in this process one member at a time). The members'
 phase-2 networks are kept, and each one's last-layer model is rebuilt with `lastlayer.PDE_SD_FACTOR` set
 to 1, 3, 10 (the default), 30 and 100: the features stay fixed, only the PDE rows' pseudo-sd changes.
@@ -50,6 +51,8 @@ from bayespinn.uq.priors import NoisePrior  # noqa: E402
 from bayespinn.uq.shared_fit import ensemble_seed  # noqa: E402
 
 FACTORS = (1.0, 3.0, 10.0, 30.0, 100.0)
+#: the held-out family (`studies/family.py`), which no diagnostic may look at
+HELD_OUT_SEED = 393247754
 SNR_DB = 30.0
 #: residual points the correlation model is fitted on (a random subset; the Cholesky costs n^3 / 3)
 CORR_FIT_POINTS = 600
@@ -147,11 +150,11 @@ def gls_view(ll: LL.LastLayer, rows: tuple, fit: dict) -> LL.LastLayer:
     return view
 
 
-def train(index: int, case: str, profile: str = "fast") -> dict:
+def train(index: int, case: str, profile: str = "fast", family_seed: int = 0) -> dict:
     """The reference and one deep ensemble on the bridge; returns what the rebuilds need (`torch.save`-able):
     the phase-2 members' last-layer inputs, their log EI shifts and trained log EIs, the priors, and the
     reference's and the ensemble's own summaries."""
-    b = family.bridge(index, 0, case)
+    b = family.bridge(index, family_seed, case)
     seq = family.data_seed(0, index)
     data = simulate(b.cfg, SNR_DB, seq)
     res = analyse(
@@ -192,6 +195,7 @@ def train(index: int, case: str, profile: str = "fast") -> dict:
     return {
         "summary": {
             "bridge": index,
+            "family_seed": family_seed,
             "case": case,
             "profile": profile,
             "alpha": family.speed_parameter(b.cfg),
@@ -260,13 +264,22 @@ def rebuild(state: dict) -> dict:
     return out
 
 
-def sweep(index: int, case: str, profile: str = "fast", cache: Path | None = None) -> dict:
+def stem(case: str, index: int, family_seed: int = 0) -> str:
+    """The bridge's file stem: family seed 0's keep their first names."""
+    fam = f"family{family_seed}-" if family_seed else ""
+    return f"{case}-{fam}bridge{index}"
+
+
+def sweep(
+    index: int, case: str, profile: str = "fast", cache: Path | None = None, family_seed: int = 0
+) -> dict:
     """`train` (or its cached result) then `rebuild`."""
-    path = None if cache is None else cache / f"members-{case}-bridge{index}-{profile}.pt"
+    name = stem(case, index, family_seed)
+    path = None if cache is None else cache / f"members-{name}-{profile}.pt"
     if path is not None and path.exists():
         state = torch.load(path, weights_only=False)
     else:
-        state = train(index, case, profile)
+        state = train(index, case, profile, family_seed)
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             torch.save(state, path)
@@ -280,10 +293,15 @@ def main(argv=None) -> int:
     ap.add_argument("--profile", default="fast", choices=("smoke", "fast", "paper"))
     ap.add_argument("--out", type=Path, default=ROOT / "reports" / "paper" / "diagnostics")
     ap.add_argument("--cache", type=Path, default=None, help="folder keeping the trained members")
+    ap.add_argument(
+        "--family-seed", type=int, default=0, help="the family (default 0, the development family)"
+    )
     a = ap.parse_args(argv)
-    out = sweep(a.bridge, a.case, a.profile, a.cache)
+    if a.family_seed == HELD_OUT_SEED:
+        ap.error(f"--family-seed {a.family_seed} is the held-out family, which chooses nothing")
+    out = sweep(a.bridge, a.case, a.profile, a.cache, a.family_seed)
     a.out.mkdir(parents=True, exist_ok=True)
-    path = a.out / f"pde-sd-{a.case}-bridge{a.bridge}.json"
+    path = a.out / f"pde-sd-{stem(a.case, a.bridge, a.family_seed)}.json"
     path.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
     print(f"wrote {path}")
     return 0
