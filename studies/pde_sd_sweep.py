@@ -47,6 +47,7 @@ from bayespinn.data.synthetic import simulate  # noqa: E402
 from bayespinn.executor import Executor  # noqa: E402
 from bayespinn.options import RunOptions  # noqa: E402
 from bayespinn.pipeline import analyse  # noqa: E402
+from bayespinn.provenance import provenance  # noqa: E402
 from bayespinn.uq.priors import NoisePrior  # noqa: E402
 from bayespinn.uq.shared_fit import ensemble_seed  # noqa: E402
 
@@ -300,6 +301,11 @@ def main(argv=None) -> int:
     if a.family_seed == HELD_OUT_SEED:
         ap.error(f"--family-seed {a.family_seed} is the held-out family, which chooses nothing")
     out = sweep(a.bridge, a.case, a.profile, a.cache, a.family_seed)
+    out["provenance"] = {
+        **provenance(),
+        "command": " ".join(["python", "studies/pde_sd_sweep.py", *(argv or sys.argv[1:])]),
+        "seed": family.data_seed(0, a.bridge),
+    }
     a.out.mkdir(parents=True, exist_ok=True)
     path = a.out / f"pde-sd-{stem(a.case, a.bridge, a.family_seed)}.json"
     path.write_text(json.dumps(out, indent=1) + "\n", encoding="utf-8")
