@@ -7,7 +7,7 @@ Crossing k of girder g of the realistic-crossing study (`studies/crossings.py`: 
 a sprung truck on a rough road, 30 dB on the four gauges), analysed under today's model (the stated speed
 and entry time, nothing declared). The modal reference, then the girder PINN with one segment (`uq.girder_pinn`,
 one network, read on the crossing's clock, `methods.clock`), whose last layer is rebuilt with the PDE rows'
-pseudo-sd at FACTORS times the fit's RMS PDE residual (the default is `lastlayer.PDE_SD_FACTOR`). For each
+pseudo-sd at FACTORS times the fit's RMS PDE residual (the default is `girder_lastlayer.GIRDER_PDE_SD_FACTOR`). For each
 factor: the log marginal likelihood of (log EI, log sigma) integrated on a grid (the evidence, up to a
 constant shared by every factor), EI's posterior mean and sd, and z against the truth. If the evidence
 picked a factor whose interval held the truth, the tolerance could be inferred. Minutes on one core.
@@ -36,7 +36,7 @@ from bayespinn.methods.clock import on_entry_clock  # noqa: E402
 from bayespinn.pipeline import analyse  # noqa: E402
 from bayespinn.provenance import provenance  # noqa: E402
 from bayespinn.uq import girder_pinn as G  # noqa: E402
-from bayespinn.uq.lastlayer import PDE_SD_FACTOR  # noqa: E402
+from bayespinn.uq.girder_lastlayer import GIRDER_PDE_SD_FACTOR as PDE_SD_FACTOR  # noqa: E402
 
 FACTORS = (1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1e3, 1e4, 1e5)
 SNR_DB = 30.0

@@ -565,7 +565,7 @@ def test_bpinn_shares_the_ensembles_fit_and_is_the_same_function_of_the_seed():
 def test_local_width_is_the_marginals_sd_on_a_grid(smoke_fit, noise_factor):
     """`LastLayer.local_sd_log_theta` (the ensemble members' own width) is the sd of log theta under the
     last-layer marginal (sigma held) times the prior's curvature: checked against a brute-force grid of
-    8001 points over +-2 in log theta, at the smoke fit's noise and 30x it."""
+    12001 points over +-3 in log theta, at the smoke fit's noise and 30x it."""
     cfg, data, problem, res = smoke_fit
     sd = float(np.std(data.value - data.value_true))
     d = data.with_values(
@@ -576,7 +576,7 @@ def test_local_width_is_the_marginals_sd_on_a_grid(smoke_fit, noise_factor):
     ls = math.log(ll.noise_mode(lt))
     prior_sd = 0.5
     got = ll.local_sd_log_theta(lt, ls, prior_sd)
-    g = lt + np.linspace(-2.0, 2.0, 8001)
+    g = lt + np.linspace(-3.0, 3.0, 12001)
     with torch.no_grad():
         lp = np.array(
             [

@@ -37,7 +37,7 @@ re-solved by L-BFGS on the reduced objective (the output layer profiled out) plu
 
 The last layer (`GirderLastLayer`): with the hidden layers fixed, the output weights are integrated out
 exactly, as in `uq.lastlayer` (Gaussian data rows y ~ N(D(phi) c, sigma^2), physics pseudo-observations
-with sds from the fit's RMS residuals, `PDE_SD_FACTOR` for the PDE rows, weight prior N(0, s_w^2) with s_w
+with sds from the fit's RMS residuals, `girder_lastlayer.GIRDER_PDE_SD_FACTOR` for the PDE rows, weight prior N(0, s_w^2) with s_w
 `WEIGHT_PRIOR_FACTOR` times the largest fitted weight), giving log p(y | phi, sigma) exactly. The physics
 rows and the weight prior enter as the output layer's *normalised* prior given phi (`log_marginal`): counted
 as observations, their precision's determinant (the PDE rows scale as EI_s^2) and their own best residual
