@@ -591,3 +591,35 @@ def test_local_width_is_the_marginals_sd_on_a_grid(smoke_fit, noise_factor):
     want = math.sqrt((p * (g - m) ** 2).sum())
     assert p[0] < 1e-6 and p[-1] < 1e-6  # the brute-force grid holds the whole density
     assert got == pytest.approx(want, rel=0.01)
+
+
+@pytest.mark.parametrize("offset_sd, converged", [(0.0, True), (5.0, False)])
+def test_a_posterior_far_from_the_fit_it_linearises_is_not_converged(offset_sd, converged):
+    """The last-layer B-PINN linearises around its fit: draws that mix well but sit 5 of their sds from the
+    fit's EI are not a trustworthy interval, and the verdict says so (the control: the same draws centred
+    on the fit converge). Draws are synthetic, 4 chains of 2000 independent normals."""
+    import warnings
+    from types import SimpleNamespace
+
+    from bayespinn.uq.bpinn_core import MAX_MOVE_SD, assemble
+    from bayespinn.uq.priors import EIPrior
+
+    rng = np.random.default_rng(3)
+    sd, shift = 0.002, math.log(1.0e9)
+    draws = np.stack(
+        [sd * rng.standard_normal((4, 2000)), -7.0 + 0.01 * rng.standard_normal((4, 2000))], -1
+    )
+    res = SimpleNamespace(
+        EI=np.array([math.exp(shift - offset_sd * sd)]), runtime_s=1.0, beta_factor=1.0
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        post = assemble(
+            draws, {}, None, {}, res=res, shift=shift, ei_prior=EIPrior(1.0e9, 0.5),
+            variant="last-layer", name="last-layer", t0=0.0,
+        )  # fmt: skip
+    assert post.diagnostics["converged"] is converged
+    assert (post.diagnostics["moved_from_fit_sd"] > MAX_MOVE_SD) is (not converged)
+    if not converged:
+        assert any("from the fit it linearises" in p for p in post.diagnostics["problems"])
+        assert "not trustworthy" in post.info["warnings"][0]
