@@ -313,6 +313,8 @@ def expected_seconds(job: Job) -> tuple[float | None, str]:
         )
         t += float((doc.get("time_reference") or {}).get("time_s") or 0.0)
         return t, "the sum of its replicates' times"
+    if doc.get("records") == []:  # a study file its job has just started afresh
+        return None, "no replicate recorded yet (a re-run has started it afresh)"
     if isinstance(doc.get("rows"), list) and any("folder" in r for r in doc["rows"]):
         return sum(
             float(r.get("runtime_s") or 0.0) for r in doc["rows"]

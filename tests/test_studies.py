@@ -550,3 +550,20 @@ def test_rerun_re_runs_the_crossing_entries_after_the_crossings_study():
         assert seconds == (study.get(job.key) or {}).get("runtime_s")
     total, how = rerun.expected_seconds(jobs[i])
     assert total > 3600 and "replicates" in how  # 30 analysed crossings, minutes each
+
+
+def test_rerun_says_a_study_just_restarted_has_no_time_yet(tmp_path, monkeypatch):
+    """A study file that a running job has started afresh holds no replicate: its expected time is unknown,
+    and the dry run says why (not that the study reuses other runs' posteriors, which is Table 5's case)."""
+    sys.path.insert(0, str(REPO / "studies"))
+    import rerun
+
+    (tmp_path / "study.json").write_text(
+        json.dumps({"schema": "x", "records": []}), encoding="utf-8"
+    )
+    (tmp_path / "table.json").write_text(json.dumps({"schema": "x", "rows": []}), encoding="utf-8")
+    monkeypatch.setattr(rerun, "ROOT", tmp_path)
+    seconds, how = rerun.expected_seconds(rerun.Job("s", ("true",), "study.json"))
+    assert seconds is None and "started it afresh" in how
+    seconds, how = rerun.expected_seconds(rerun.Job("t", ("true",), "table.json"))
+    assert seconds is None and "reuses other runs" in how
