@@ -186,8 +186,8 @@ def assemble(
     warm_start: str = "own fit",
 ) -> Posterior:
     """The B-PINN posterior from z draws (chain, draw, 2) of (log theta, log sigma): R-hat/ESS, the sampler's
-    problems (which decide `converged`), identifiability and, for the last-layer variant, how far the
-    posterior moved from the fit it linearises."""
+    problems, identifiability and, for the last-layer variant, how far the posterior moved from the fit it
+    linearises (the problems and a move beyond `MAX_MOVE_SD` decide `converged`)."""
     log_ei = draws[:, :, 0] + shift
     EI, sigma = np.exp(log_ei), np.exp(draws[:, :, 1])
     rho = np.tanh(draws[:, :, 2]) if draws.shape[-1] > 2 else None
