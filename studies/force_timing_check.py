@@ -13,8 +13,18 @@ wrong timing under each force law.
     python studies/force_timing_check.py --girder 1 --crossing 3 --law shared --band
     python studies/force_timing_check.py --girder 1 --crossing 3 --law shared --band --band-range 0.5,2.5
 
-`--band` adds the force spectrum's band near the first mode (`bayespinn.crossings.tail`), which the
-reference does not carry; `--band-range` sets that band in units of the first mode's frequency.
+`--band` adds the force spectrum's band beyond the law's basis up to the road's reach
+(`bayespinn.crossings.tail`), as the reference's law does, with every mode in that reach dynamic; without
+it, the law without the band (the reference's before it). `--band-range` sets the band in units of the
+first mode's frequency instead.
+`--road-law` gives the axles' own and shared basis functions the band's prior sds too (the contact force
+of a sprung body on an ISO 8608 road, `tail.relative_force_sd`, at the crossing's speed and suspension,
+times s / `FORCE_S_MEDIAN`) in place of the inertial squared exponential, whose time scale l then enters
+nothing; `--basis-to F` continues the axles' basis to F Hz (the reference's stops at 4 / `FORCE_L_MIN`
+rad/s, 5.3 Hz).
+
+    python studies/force_timing_check.py --girder 0 --crossing 3 --road-law --basis-to 21
+    python studies/force_timing_check.py --girder 0 --crossing 3 --band
 
 A diagnostic, not a study with records: it prints its table (one core, a few minutes).
 """
@@ -78,7 +88,39 @@ def posterior(
     return post, th
 
 
-def tail_range() -> tuple[float, float]:
+def use_road_law() -> None:
+    """The axles' basis functions' prior sds from the road and the suspension (`--road-law`)."""
+    from bayespinn.crossings import likelihood as lk
+    from bayespinn.crossings.forward import basis_frequencies
+    from bayespinn.crossings.tail import relative_force_sd
+
+    inertial = lk.CrossingTerm.column_sds
+
+    def column_sds(self, p, i):
+        rest = inertial(self, p, i)
+        alpha, _, _ = basis_frequencies(self.model.L / p["v"][i], self.model.n_basis)
+        level = np.asarray(p["s"], float)[:, None] / lk.FORCE_S_MEDIAN
+        f = relative_force_sd(alpha, p["v"][i], p["fb"][i], p["zb"][i]) * level
+        d = np.tile(f, (1, self.model.loads.size))
+        if self.common:
+            r = np.asarray(p["r"], float)[:, None]
+            d = np.concatenate([d * np.sqrt(1.0 - r), f * np.sqrt(r)], axis=1)
+        return np.concatenate([d, rest[:, d.shape[1] :]], axis=1)
+
+    lk.CrossingTerm.column_sds = column_sds
+
+
+def basis_to(hz: float) -> None:
+    """The axles' basis continued to hz (`--basis-to`): `n_basis_for` as if the law's shortest time scale
+    were 4 / (2 pi hz)."""
+    from bayespinn.crossings import likelihood as lk
+
+    lk.MAX_BASIS = 10**6
+    ell = lk.BASIS_CUTOFF / (2 * math.pi * hz)
+    peak.n_basis_for = lambda Te: int(math.ceil(lk.BASIS_CUTOFF * 1.5 * Te / (math.pi * ell)))
+
+
+def tail_range() -> tuple[float, float] | None:
     from bayespinn.crossings import tail
 
     return tail.BAND
@@ -106,10 +148,18 @@ def main(argv=None) -> int:
     p.add_argument("--law", choices=("independent", "shared"), default="shared")
     p.add_argument("--road-nmax", type=float, default=None, help="cycles/m; default the ISO band's")
     p.add_argument(
-        "--band", action="store_true", help="the force spectrum's band near the first mode"
+        "--band", action="store_true", help="the force spectrum's band up to the road's reach"
     )
-    p.add_argument("--band-range", default=None, help="lo,hi in first-mode frequencies (0.5,1.6)")
+    p.add_argument(
+        "--band-range", default=None, help="lo,hi in first-mode frequencies, e.g. 0.5,1.6"
+    )
+    p.add_argument("--road-law", action="store_true", help="the road's law on the axles' basis")
+    p.add_argument("--basis-to", type=float, default=None, help="Hz the axles' basis reaches")
     a = p.parse_args(argv)
+    if a.road_law:
+        use_road_law()
+    if a.basis_to is not None:
+        basis_to(a.basis_to)
     if a.band_range is not None:
         from bayespinn.crossings import tail
 
@@ -139,7 +189,13 @@ def main(argv=None) -> int:
     best, lp = (peak1, lp1) if lp1 >= lp2 else (peak2, lp2)
     h = np.array([peak.step(n, post) for n in names])
     sd = peak.hessian_scale(post, best, h)
-    band = f", band {tail_range()}" if a.band else ""
+    band = f", band {tail_range() or 'to the road reach'}" if a.band else ""
+    band += ", road law" if a.road_law else ""
+    band += (
+        f", basis to {a.basis_to:g} Hz ({post.terms[0].model.n_basis} per axle)"
+        if a.basis_to
+        else ""
+    )
     print(f"girder {a.girder} crossing {a.crossing}, {a.law} axles, road n_max {a.road_nmax}{band}")
     print(
         f"log posterior at the peak {lp:.2f}; with speed, entry time and EI at the truth {lp_truth:.2f}"

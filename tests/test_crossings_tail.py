@@ -1,5 +1,6 @@
-"""The force spectrum's band near the girder's first mode (`bayespinn.crossings.tail`): its columns are the
-force basis continued (not a second basis), it spans the stated band of the first mode's frequency, its
+"""The force spectrum's band beyond the law's basis (`bayespinn.crossings.tail`): its columns are the force
+basis continued (not a second basis), it reaches the road's shortest wavelength (or a stated band of the
+first mode's frequency), the modes within its reach respond dynamically, its
 prior level is a sprung body's contact force on an ISO 8608 road (checked against a time integration of
 that body on a generated road, apart from the closed form), and the posterior reads its level from data
 that carry it, not from data that do not (the negative control)."""
@@ -49,16 +50,39 @@ def params(tail_level: float = 1.0) -> dict:
 BAND = tail.band_of(L, MU, EI, V, M)
 
 
-def test_the_band_spans_the_first_mode():
-    """band_of's functions lie in BAND times the first angular frequency, and one spacing beyond either
-    end would not."""
+def test_the_band_continues_the_basis_to_the_road_reach():
+    """band_of's functions start right after the law's n_basis and end at the road's reach v ROAD_N_MAX:
+    the last within it, the next beyond it."""
     start, count = BAND
+    assert start == M + 1 and count > 10
+    alpha, _, _ = basis_frequencies(np.array([L / V]), count + 1, start)
+    top = 2 * math.pi * V * tail.ROAD_N_MAX
+    assert alpha[0, count - 1] <= top < alpha[0, count]
+
+
+def test_a_stated_band_spans_its_range_of_the_first_mode(monkeypatch):
+    """With BAND set, band_of's functions lie in BAND times the first angular frequency, and one spacing
+    beyond either end would not."""
+    monkeypatch.setattr(tail, "BAND", (0.5, 1.6))
+    start, count = tail.band_of(L, MU, EI, V, M)
     assert count > 10 and start > M
     w1 = (math.pi / L) ** 2 * math.sqrt(EI / MU)
     alpha, _, _ = basis_frequencies(np.array([L / V]), count + 2, start - 1)
     inside = alpha[0, 1:-1] / w1
     assert inside.min() >= tail.BAND[0] and inside.max() <= tail.BAND[1]
     assert alpha[0, 0] / w1 < tail.BAND[0] and alpha[0, -1] / w1 > tail.BAND[1]
+
+
+def test_the_modes_within_the_band_respond_dynamically():
+    """basis_modes counts the modes whose frequency lies within the road's reach: here (20 m, 10 m/s,
+    reach 178 rad/s) modes 1-3 (35, 139, 313 rad/s: the first two); never fewer than one, never more than
+    the model's modes; a slower vehicle reaches fewer."""
+    w = (math.pi * np.arange(1, 4) / L) ** 2 * math.sqrt(EI / MU)
+    top = 2 * math.pi * V * tail.ROAD_N_MAX
+    assert w[1] <= top < w[2]
+    assert tail.basis_modes(L, MU, EI, V, 8) == 2
+    assert tail.basis_modes(L, MU, EI, V, 1) == 1
+    assert tail.basis_modes(L, MU, EI, 1.0, 8) == 1
 
 
 def test_band_columns_are_the_longer_basis():

@@ -24,28 +24,35 @@ from .likelihood import FORCE_L_MEDIAN, CrossingsLogPosterior, CrossingTerm, n_b
 from .resonance import AMPLITUDE_MEDIAN, Resonance
 from .resonance import NAMES as RESONANT_NAMES
 
-#: modes in the dynamic correction of the force-basis responses: the fluctuation's spectrum lies below
-#: 4 / FORCE_L_MIN = 33 rad/s, under the first mode (63 rad/s for the Exeter girder) and far under the
+#: modes in the dynamic correction of the force-basis responses without the band: the law's spectrum lies
+#: below 4 / FORCE_L_MIN = 33 rad/s, under the first mode (63 rad/s for the Exeter girder) and far under the
 #: second; the first mode alone leaves 0.2 % of those responses (strain gauges, against 24 modes), some
-#: 4e-5 of the signal, while no mode at all would leave 15 %
+#: 4e-5 of the signal, while no mode at all would leave 15 %. With the band, every mode within its reach
+#: (`tail.basis_modes`).
 BASIS_MODES = 1
 
 
 def terms(
-    cfg: Config, data: Measurements, n_modes: int, forces: bool, band: bool = False
+    cfg: Config, data: Measurements, n_modes: int, forces: bool, band: bool = True
 ) -> list[CrossingTerm]:
-    """Each crossing's `CrossingTerm`; band: with fluctuating forces, the force spectrum's band near the
-    first mode (`tail`; the timing diagnostic's option, not the reference's law)."""
+    """Each crossing's `CrossingTerm`; band: with fluctuating forces, the force spectrum beyond the law's
+    basis up to the road's reach (`tail`; part of the reference's law, False for the timing diagnostic's
+    law without it)."""
     a_u, a_xx = data.weights
     out = []
     for name, rows, veh in split_crossings(cfg, data):
         nb = n_basis_for(cfg.beam.length / veh.speed) if forces else 0
         b = cfg.beam
         extra = tail.band_of(b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed, nb)
+        dynamic = (
+            tail.basis_modes(b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed, n_modes)
+            if forces and band
+            else min(n_modes, BASIS_MODES)
+        )
         model = CrossingModel(
             b.length, b.mass_per_length, veh.loads, veh.offsets,
             data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
-            basis_modes=min(n_modes, BASIS_MODES), band=extra if forces and band else None,
+            basis_modes=dynamic, band=extra if forces and band else None,
         )  # fmt: skip
         res = (
             Resonance.build(model, veh.speed, veh.entry_time, cfg.prior.EI_median)

@@ -7,7 +7,8 @@ grid at the stated values, then least squares with the priors as pseudo-observat
 there. With constant forces: emcee (`uq.sampler.sample`, the reference's driver) on every inferred
 parameter, the noise sd integrated out and drawn afterwards from its exact inverse-gamma conditional, or
 with several crossings each one's speed and entry time by Laplace (`laplace`). With fluctuating forces the
-forces and the resonant terms (`resonance`) are integrated out exactly; the rest is linearised
+forces (their law's basis and, up to the road's shortest wavelength, its band: `tail`) and the resonant
+terms (`resonance`) are integrated out exactly; the rest is linearised
 (`linearised`: importance sampling, or emcee, on the hyperparameters, the other parameters from their
 Gaussian conditional) and,
 where that fails its importance check, the exact posterior is importance-sampled (`importance`). With
@@ -266,6 +267,8 @@ def crossings_reference(
         converged=converged, problems=problems, tau=ch.tau, steps=ch.steps, walkers=s.n_walkers * s.n_groups,
         acceptance=ch.acceptance, n_modes=n_modes, truncation_error=trunc,
         force_basis=[c.model.n_basis for c in post.terms] if forces else 0,
+        force_band=[c.model.n_band for c in post.terms] if forces else 0,
+        dynamic_modes=[c.model.basis_modes for c in post.terms] if forces else 0,
         parameters=list(L.names), noise_prior=noise.describe(), scheme=scheme,
         diagnostics_over="the worst of every sampled parameter", **extra,
     )  # fmt: skip

@@ -1,12 +1,15 @@
-"""The axle force's spectrum near the girder's first mode, from the road and the suspension: a band of
-further force basis functions (`forward.CrossingModel(band=...)`), common to the axles, whose prior sds
-follow from ISO 8608 roughness seen through a sprung body.
+"""The axle force's spectrum above the fluctuating-force law's basis, from the road and the suspension: a
+band of further force basis functions (`forward.CrossingModel(band=...)`), common to the axles, reaching
+the road's shortest wavelength, whose prior sds follow from ISO 8608 roughness seen through a sprung body.
 
 Why. The fluctuating-force law's spectrum (an inertial squared exponential) falls off fast above its peak,
 near the body's bounce, while a suspension passes the road's short wavelengths into the contact force with
-a spectrum that stays up to the speed times the road's shortest wavelength. Around the girder's first mode
-that tail drives the girder resonantly, and a law without it reads the response's timing (hence speed and
-EI) wrongly.
+a spectrum that stays up to the speed times the road's shortest wavelength. That content drives the
+girder's modes in that range resonantly and rides on the quasi-static response, and a law without it reads
+the response's timing (hence speed and EI) wrongly. A band over 0.5-1.6 times the first mode alone closed
+under a quarter of that error on one crossing; carried to the road's reach, with every mode in it dynamic
+in the basis responses (`basis_modes`), it removes most of it (docs/methods.md, "The road's short
+wavelengths").
 
 The prior. A body of mass m on a spring and damper (bounce angular frequency w_b, damping ratio z_b) over a
 road r(x) driven at speed v: the contact force's dynamic part is m times the body's acceleration, whose
@@ -18,7 +21,7 @@ wants the two-sided density in angular frequency of the kernel convention k(r) =
 S = half the one-sided PSD per Hz. Its median takes Gd(n0) at the boundary of roads of classes A and B
 (32e-6 m^3); the level is then inferred, `tail` on a log-normal prior (median 1, log-sd `TAIL_LOG_SD`, so
 classes A to C within its 95 % range). Above v `ROAD_N_MAX` (ISO 8608's shortest wavelength, 0.35 m)
-the law states nothing and the band's sds are zero.
+the law states nothing, so the band ends there.
 
 A lorry's axles ride the same road, and once the approach's transient has died each one's force, as a
 function of its own time on the span, is nearly the same history: the band is one set of weights shared
@@ -39,21 +42,39 @@ ROAD_N0, ROAD_N_MAX = 0.1, 2.83
 BOUNDARY_GD0 = 32e-6
 #: the band's level about that median: log-normal, log-sd (in sd, not variance)
 TAIL_LOG_SD = 1.0
-#: the band, in units of the girder's first angular frequency at the EI prior's median
-BAND = (0.5, 1.6)
+#: the band's reach: None, from the law's basis to the road's (v ROAD_N_MAX); or (lo, hi) in units of the
+#: girder's first angular frequency at the EI prior's median (`studies/force_timing_check.py --band-range`)
+BAND: tuple[float, float] | None = None
 G = 9.81
 
 
 def band_of(length: float, mu: float, EI: float, speed: float, n_basis: int) -> tuple[int, int]:
     """(first index, count) of the Hilbert-space basis functions (`forward.basis_frequencies` at the
-    axle time on the span L / speed) whose frequencies lie in `BAND` times the first mode's at EI, the
-    first beyond the n_basis functions the force law already has; count 0 when none is left."""
-    w1 = (math.pi / length) ** 2 * math.sqrt(EI / mu)
+    axle time on the span L / speed) beyond the n_basis functions the force law already has, up to the
+    road's reach `reach` (or within `BAND` times the first mode's angular frequency at EI, when set);
+    count 0 when none is left."""
     Lh = BOUNDARY_FACTOR * (length / speed) / 2.0
     per = math.pi / (2.0 * Lh)  # spacing of alpha_k = k per
-    lo = max(n_basis + 1, math.ceil(BAND[0] * w1 / per))
-    hi = math.floor(BAND[1] * w1 / per)
+    lo, top = n_basis + 1, reach(speed)
+    if BAND is not None:
+        w1 = (math.pi / length) ** 2 * math.sqrt(EI / mu)
+        lo, top = max(lo, math.ceil(BAND[0] * w1 / per)), BAND[1] * w1
+    hi = math.floor(top / per)
     return (lo, max(0, hi - lo + 1))
+
+
+def reach(speed: float) -> float:
+    """The highest angular frequency [rad/s] of the road's force at `speed`: 2 pi v ROAD_N_MAX."""
+    return 2.0 * math.pi * speed * ROAD_N_MAX
+
+
+def basis_modes(length: float, mu: float, EI: float, speed: float, n_modes: int) -> int:
+    """Modes whose response to the force basis is integrated dynamically: those with an angular frequency
+    (at EI) within the band's reach, at least the first, at most n_modes. The others respond
+    quasi-statically, which is exact well below their frequency."""
+    w = (math.pi * np.arange(1, n_modes + 1) / length) ** 2 * math.sqrt(EI / mu)
+    top = reach(speed) if BAND is None else BAND[1] * float(w[0])
+    return int(min(n_modes, max(1, int(np.sum(w <= top)))))
 
 
 def relative_force_sd(alpha: np.ndarray, speed, fb, zb) -> np.ndarray:
