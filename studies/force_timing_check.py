@@ -14,8 +14,8 @@ wrong timing under each force law.
     python studies/force_timing_check.py --girder 1 --crossing 3 --law shared --band --band-range 0.5,2.5
 
 `--band` adds the force spectrum's band beyond the law's basis up to the road's reach
-(`bayespinn.crossings.tail`), as the reference's law does, with every mode in that reach dynamic; without
-it, the law without the band (the reference's before it). `--band-range` sets the band in units of the
+(`bayespinn.crossings.tail`), with every mode in that reach dynamic, which the reference does not carry
+yet. `--band-range` sets the band in units of the
 first mode's frequency instead.
 `--road-law` gives the axles' own and shared basis functions the band's prior sds too (the contact force
 of a sprung body on an ISO 8608 road, `tail.relative_force_sd`, at the crossing's speed and suspension,

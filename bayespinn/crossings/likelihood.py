@@ -20,10 +20,11 @@ argument) is a common part, variance r s^2, plus its own, variance (1 - r) s^2, 
 (`logit_r`, uniform prior on [0, 1]). The common part's columns are the sum of the axles' columns; they
 join the basis after the axles' own and before the resonant terms'.
 
-The reference's crossing models carry a band of further basis functions beyond the law's, up to the
+A crossing's model may carry a band of further basis functions beyond the law's, up to the
 road's shortest wavelength (`tail`: the force's spectrum that a suspension passes from the road's short
 wavelengths, which the law's squared exponential lacks), shared by the axles, their sds the road's law
-times a level inferred on a log-normal prior (`log_tail`); their columns follow the common part's.
+times a level inferred on a log-normal prior (`log_tail`); their columns follow the common part's (the
+timing diagnostic's law, `peak.terms(..., band=True)`, not yet the reference's).
 """
 
 from __future__ import annotations

@@ -33,11 +33,11 @@ BASIS_MODES = 1
 
 
 def terms(
-    cfg: Config, data: Measurements, n_modes: int, forces: bool, band: bool = True
+    cfg: Config, data: Measurements, n_modes: int, forces: bool, band: bool = False
 ) -> list[CrossingTerm]:
     """Each crossing's `CrossingTerm`; band: with fluctuating forces, the force spectrum beyond the law's
-    basis up to the road's reach (`tail`; part of the reference's law, False for the timing diagnostic's
-    law without it)."""
+    basis up to the road's reach, every mode within it dynamic (`tail`; the timing diagnostic's law,
+    not yet the reference's: docs/methods.md, "The road's short wavelengths")."""
     a_u, a_xx = data.weights
     out = []
     for name, rows, veh in split_crossings(cfg, data):

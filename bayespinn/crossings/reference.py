@@ -7,8 +7,7 @@ grid at the stated values, then least squares with the priors as pseudo-observat
 there. With constant forces: emcee (`uq.sampler.sample`, the reference's driver) on every inferred
 parameter, the noise sd integrated out and drawn afterwards from its exact inverse-gamma conditional, or
 with several crossings each one's speed and entry time by Laplace (`laplace`). With fluctuating forces the
-forces (their law's basis and, up to the road's shortest wavelength, its band: `tail`) and the resonant
-terms (`resonance`) are integrated out exactly; the rest is linearised
+forces and the resonant terms (`resonance`) are integrated out exactly; the rest is linearised
 (`linearised`: importance sampling, or emcee, on the hyperparameters, the other parameters from their
 Gaussian conditional) and,
 where that fails its importance check, the exact posterior is importance-sampled (`importance`). With
