@@ -115,9 +115,8 @@ def basis_to(hz: float) -> None:
     were 4 / (2 pi hz)."""
     from bayespinn.crossings import likelihood as lk
 
-    lk.MAX_BASIS = 10**6
     ell = lk.BASIS_CUTOFF / (2 * math.pi * hz)
-    peak.n_basis_for = lambda Te: int(math.ceil(lk.BASIS_CUTOFF * 1.5 * Te / (math.pi * ell)))
+    peak.n_basis_for = functools.partial(lk.n_basis_for, l_min=ell, cap=10**6)
 
 
 def tail_range() -> tuple[float, float] | None:

@@ -61,10 +61,12 @@ def inertial_spectral_sd(alpha: np.ndarray, s: np.ndarray, ell: np.ndarray) -> n
     return s * np.sqrt(math.sqrt(2 * math.pi) * ell / 3.0) * u**2 * np.exp(-0.25 * u * u)
 
 
-def n_basis_for(Te: float) -> int:
-    """Basis functions per axle for an axle time on the span Te [s] (`BASIS_CUTOFF`, `MAX_BASIS`)."""
+def n_basis_for(Te: float, l_min: float | None = None, cap: int | None = None) -> int:
+    """Basis functions per axle for an axle time on the span Te [s] (`BASIS_CUTOFF`, at most `MAX_BASIS`
+    or cap), reaching BASIS_CUTOFF / l_min rad/s (l_min: `FORCE_L_MIN` unless given)."""
     Lh = 1.5 * Te / 2.0
-    return int(min(MAX_BASIS, math.ceil(BASIS_CUTOFF * 2.0 * Lh / (math.pi * FORCE_L_MIN))))
+    ell = FORCE_L_MIN if l_min is None else l_min
+    return int(min(cap or MAX_BASIS, math.ceil(BASIS_CUTOFF * 2.0 * Lh / (math.pi * ell))))
 
 
 #: parameter sets evaluated together: a crossing's responses for many sets at once outgrow the caches

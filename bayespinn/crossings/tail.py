@@ -52,15 +52,14 @@ G = 9.81
 def band_of(length: float, mu: float, EI: float, speed: float, n_basis: int) -> tuple[int, int]:
     """(first index, count) of the Hilbert-space basis functions (`forward.basis_frequencies` at the
     axle time on the span L / speed) beyond the n_basis functions the force law already has, up to the
-    road's reach `reach` (or within `BAND` times the first mode's angular frequency at EI, when set);
-    count 0 when none is left."""
+    band's top (`top`: the road's reach, or `BAND` times the first mode's angular frequency at EI, when
+    set); count 0 when none is left."""
     Lh = BOUNDARY_FACTOR * (length / speed) / 2.0
     per = math.pi / (2.0 * Lh)  # spacing of alpha_k = k per
-    lo, top = n_basis + 1, reach(speed)
+    lo = n_basis + 1
     if BAND is not None:
-        w1 = (math.pi / length) ** 2 * math.sqrt(EI / mu)
-        lo, top = max(lo, math.ceil(BAND[0] * w1 / per)), BAND[1] * w1
-    hi = math.floor(top / per)
+        lo = max(lo, math.ceil(BAND[0] * mode_frequencies(length, mu, EI, 1)[0] / per))
+    hi = math.floor(top(length, mu, EI, speed) / per)
     return (lo, max(0, hi - lo + 1))
 
 
@@ -69,13 +68,24 @@ def reach(speed: float) -> float:
     return 2.0 * math.pi * speed * ROAD_N_MAX
 
 
+def mode_frequencies(length: float, mu: float, EI: float, n: int) -> np.ndarray:
+    """The pinned girder's first n angular frequencies [rad/s] at EI."""
+    return (math.pi * np.arange(1, n + 1) / length) ** 2 * math.sqrt(EI / mu)
+
+
+def top(length: float, mu: float, EI: float, speed: float) -> float:
+    """The band's highest angular frequency [rad/s]: the road's reach, or BAND[1] times the first mode's."""
+    if BAND is None:
+        return reach(speed)
+    return BAND[1] * float(mode_frequencies(length, mu, EI, 1)[0])
+
+
 def basis_modes(length: float, mu: float, EI: float, speed: float, n_modes: int) -> int:
     """Modes whose response to the force basis is integrated dynamically: those with an angular frequency
-    (at EI) within the band's reach, at least the first, at most n_modes. The others respond
+    (at EI) within the band's top, at least the first, at most n_modes. The others respond
     quasi-statically, which is exact well below their frequency."""
-    w = (math.pi * np.arange(1, n_modes + 1) / length) ** 2 * math.sqrt(EI / mu)
-    top = reach(speed) if BAND is None else BAND[1] * float(w[0])
-    return int(min(n_modes, max(1, int(np.sum(w <= top)))))
+    w = mode_frequencies(length, mu, EI, n_modes)
+    return int(min(n_modes, max(1, int(np.sum(w <= top(length, mu, EI, speed))))))
 
 
 def relative_force_sd(alpha: np.ndarray, speed, fb, zb) -> np.ndarray:
