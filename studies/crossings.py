@@ -242,6 +242,8 @@ def fingerprint(args) -> str:
         "resonant_modes": RESONANT_MODES if args.forces == "fluctuating" else 0,
         # the axles' fluctuations with a shared part (the same road): records made before are not reused
         "shared_road": args.forces == "fluctuating",
+        # the road's band of short wavelengths through a sprung body: records made before are not reused
+        "road_band": args.forces == "fluctuating" and args.vehicle == "sprung",
     }
     return hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()[:16]
 

@@ -24,7 +24,7 @@ A crossing's model may carry a band of further basis functions beyond the law's,
 road's shortest wavelength (`tail`: the force's spectrum that a suspension passes from the road's short
 wavelengths, which the law's squared exponential lacks), shared by the axles, their sds the road's law
 times a level inferred on a log-normal prior (`log_tail`); their columns follow the common part's (the
-timing diagnostic's law, `peak.terms(..., band=True)`, not yet the reference's).
+reference's law for a sprung vehicle, `peak.terms`).
 """
 
 from __future__ import annotations

@@ -33,26 +33,29 @@ BASIS_MODES = 1
 
 
 def terms(
-    cfg: Config, data: Measurements, n_modes: int, forces: bool, band: bool = False
+    cfg: Config, data: Measurements, n_modes: int, forces: bool, band: bool | None = None
 ) -> list[CrossingTerm]:
-    """Each crossing's `CrossingTerm`; band: with fluctuating forces, the force spectrum beyond the law's
-    basis up to the road's reach, every mode within it dynamic (`tail`; the timing diagnostic's law,
-    not yet the reference's: docs/methods.md, "The road's short wavelengths")."""
+    """Each crossing's `CrossingTerm`. band: with fluctuating forces, the force spectrum beyond the law's
+    basis up to the road's reach, every mode within it dynamic (`tail`). None (the reference's law): on
+    for a sprung vehicle, whose suspension passes the road's short wavelengths into the axle forces, off
+    for moving forces (no body, so no road spectrum to derive the band's prior from); True or False
+    forces it (the timing diagnostic, `studies/force_timing_check.py`)."""
     a_u, a_xx = data.weights
     out = []
     for name, rows, veh in split_crossings(cfg, data):
         nb = n_basis_for(cfg.beam.length / veh.speed) if forces else 0
         b = cfg.beam
+        with_band = forces and (veh.model == "sprung" if band is None else band)
         extra = tail.band_of(b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed, nb)
         dynamic = (
             tail.basis_modes(b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed, n_modes)
-            if forces and band
+            if with_band
             else min(n_modes, BASIS_MODES)
         )
         model = CrossingModel(
             b.length, b.mass_per_length, veh.loads, veh.offsets,
             data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
-            basis_modes=dynamic, band=extra if forces and band else None,
+            basis_modes=dynamic, band=extra if with_band else None,
         )  # fmt: skip
         res = (
             Resonance.build(model, veh.speed, veh.entry_time, cfg.prior.EI_median)

@@ -9,8 +9,8 @@ girder's modes in that range resonantly and rides on the quasi-static response, 
 the response's timing (hence speed and EI) wrongly. A band over 0.5-1.6 times the first mode alone closed
 under a quarter of that error on one crossing; carried to the road's reach, with every mode in it dynamic
 in the basis responses (`basis_modes`), it removes most of it on three of the worst, not on all
-(docs/methods.md, "The road's short wavelengths"). It is the timing diagnostic's law
-(`peak.terms(..., band=True)`), not yet the reference's.
+(docs/methods.md, "The road's short wavelengths"). The reference carries it for a sprung vehicle with
+fluctuating forces (`peak.terms`); with moving forces there is no body to pass the road's spectrum.
 
 The prior. A body of mass m on a spring and damper (bounce angular frequency w_b, damping ratio z_b) over a
 road r(x) driven at speed v: the contact force's dynamic part is m times the body's acceleration, whose
