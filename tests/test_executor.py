@@ -159,6 +159,35 @@ def test_coverage_resumes_from_an_earlier_study_file(tmp_path, monkeypatch):
     assert run(2, resume_from=first)["resumed_replicates"] == 0 and calls == [0, 1]
 
 
+def test_a_pinn_study_is_not_resumed_across_a_change_of_its_model_constants(monkeypatch):
+    """The PINNs' pseudo-observation and weight-prior factors live in code, not in the configuration: a
+    study whose replicates were made with another factor is another study (its key differs), so resuming
+    cannot pool replicates of two models. The reference's key does not depend on them."""
+    from bayespinn.uq import coverage as cov
+    from bayespinn.uq import girder_lastlayer, lastlayer
+
+    def keys():
+        return {
+            m: cov.fingerprint(
+                m, preset(), 10.0, 0, 0.9, "fixed", cov.study_options(m, 10.0, SMALL)
+            )
+            for m in ("ensemble", "bpinn", "modal")
+        }
+
+    before = keys()
+    assert keys() == before  # the same code, the same keys
+    for module, name in (
+        (lastlayer, "PDE_SD_FACTOR"),
+        (lastlayer, "WEIGHT_PRIOR_FACTOR"),
+        (girder_lastlayer, "GIRDER_PDE_SD_FACTOR"),
+    ):
+        with monkeypatch.context() as mp:
+            mp.setattr(module, name, getattr(module, name) * 3)
+            after = keys()
+        assert after["ensemble"] != before["ensemble"] and after["bpinn"] != before["bpinn"], name
+        assert after["modal"] == before["modal"], name
+
+
 def _ensemble(executor, seed=3):
     import numpy as np
 

@@ -221,11 +221,29 @@ def verdict(hits: int, n: int, level: float, false_failure: float = 0.01) -> str
     return f"consistent with {pct}" if lo <= hits <= hi else f"not consistent with {pct}"
 
 
+def law_constants(method: str) -> dict:
+    """The constants of a method's statistical model that neither the configuration nor the options hold
+    (the PINNs' pseudo-observation and weight-prior factors), so that a study resumed after one of them
+    changed starts afresh instead of pooling replicates of two models. The reference's model is all in
+    its configuration: none."""
+    if methods.get(method).reference:
+        return {}
+    from . import girder_lastlayer, lastlayer
+
+    return {
+        "pde_sd_factor": lastlayer.PDE_SD_FACTOR,
+        "girder_pde_sd_factor": girder_lastlayer.GIRDER_PDE_SD_FACTOR,
+        "weight_prior_factor": lastlayer.WEIGHT_PRIOR_FACTOR,
+        "min_pseudo_sd": lastlayer.MIN_PSEUDO_SD,
+    }
+
+
 def fingerprint(
     method: str, cfg: Config, snr_db, seed: int, level: float, truth: str, opts: RunOptions
 ) -> str:
-    """What decides a replicate's result: method, configuration, noise level, seed, level, truth and the
-    method's options (not the executor, the worker count or the number of replicates)."""
+    """What decides a replicate's result: method, configuration, noise level, seed, level, truth, the
+    method's options and its model's constants (`law_constants`); not the executor, the worker count or
+    the number of replicates."""
     from .posterior import jsonable
 
     spec = {
@@ -243,6 +261,8 @@ def fingerprint(
         "bpinn_variant": opts.bpinn_variant,
         "seeding": SEEDING,
     }
+    if law := law_constants(method):  # none for the reference: its studies' keys stay as they were
+        spec["law"] = law
     return hashlib.sha256(json.dumps(spec, sort_keys=True, default=repr).encode()).hexdigest()[:16]
 
 
