@@ -160,3 +160,25 @@ def test_the_posterior_reads_the_band_level(carried):
         assert abs(best - math.log(2.0)) <= 0.4
     else:
         assert best <= math.log(2.0) - 1.5
+
+
+def test_the_reference_carries_the_band_for_a_sprung_vehicle_only():
+    """The reference's law (`peak.terms` with band=None): the band for a sprung vehicle with fluctuating
+    forces, none for moving forces (no body to derive its prior from) or constant forces; band=True or
+    False overrides it (the timing diagnostic)."""
+    import dataclasses
+
+    import bayespinn as bp
+    from bayespinn.crossings import peak
+
+    cfg = bp.resolve("strain", {"model": {"axle_forces": "fluctuating"}})
+    data = bp.simulate(cfg, 30.0, seed=0)
+    sprung = dataclasses.replace(cfg, vehicle=dataclasses.replace(cfg.vehicle, model="sprung"))
+    forces = dataclasses.replace(cfg, vehicle=dataclasses.replace(cfg.vehicle, model="forces"))
+
+    def n_band(c, fluctuating=True, band=None):
+        return peak.terms(c, data, 8, fluctuating, band=band)[0].model.n_band
+
+    assert n_band(sprung) > 0
+    assert n_band(forces) == 0 and n_band(sprung, fluctuating=False) == 0
+    assert n_band(forces, band=True) == n_band(sprung) and n_band(sprung, band=False) == 0
