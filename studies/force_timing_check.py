@@ -14,9 +14,9 @@ wrong timing under each force law.
     python studies/force_timing_check.py --girder 1 --crossing 3 --law shared --band --band-range 0.5,2.5
 
 `--band` adds the force spectrum's band beyond the law's basis up to the road's reach
-(`bayespinn.crossings.tail`), with every mode in that reach dynamic, which the reference does not carry
-yet. `--band-range` sets the band in units of the
-first mode's frequency instead.
+(`bayespinn.crossings.tail`), with every mode in that reach dynamic: the reference's law for a sprung
+vehicle; without `--band` the law alone (the reference's law before the band). `--band-range` sets the
+band in units of the first mode's frequency instead.
 `--road-law` gives the axles' own and shared basis functions the band's prior sds too (the contact force
 of a sprung body on an ISO 8608 road, `tail.relative_force_sd`, at the crossing's speed and suspension,
 times s / `FORCE_S_MEDIAN`) in place of the inertial squared exponential, whose time scale l then enters

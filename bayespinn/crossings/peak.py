@@ -46,16 +46,15 @@ def terms(
         nb = n_basis_for(cfg.beam.length / veh.speed) if forces else 0
         b = cfg.beam
         with_band = forces and (veh.model == "sprung" if band is None else band)
-        extra = tail.band_of(b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed, nb)
-        dynamic = (
-            tail.basis_modes(b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed, n_modes)
-            if with_band
-            else min(n_modes, BASIS_MODES)
-        )
+        extra, dynamic = None, min(n_modes, BASIS_MODES)
+        if with_band:
+            girder = (b.length, b.mass_per_length, cfg.prior.EI_median, veh.speed)
+            extra = tail.band_of(*girder, nb)
+            dynamic = tail.basis_modes(*girder, n_modes)
         model = CrossingModel(
             b.length, b.mass_per_length, veh.loads, veh.offsets,
             data.x[rows], data.t[rows], a_u[rows], a_xx[rows], n_modes=n_modes, n_basis=nb,
-            basis_modes=dynamic, band=extra if with_band else None,
+            basis_modes=dynamic, band=extra,
         )  # fmt: skip
         res = (
             Resonance.build(model, veh.speed, veh.entry_time, cfg.prior.EI_median)
