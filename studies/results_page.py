@@ -497,15 +497,14 @@ def _crossings() -> Section:
             Entry("nothing declared: within 0.3 record sd", CROSSINGS, "exeter_check.within", ""),
         ]
     for key in sorted(k for k in doc if k.startswith("joint") and doc[k]):
-        who = (
-            "joint analysis"
-            if key == "joint"
-            else f"joint analysis, girder {key[len('joint_g') :]}"
-        )
+        who = f"joint analysis, girder {doc[key].get('girder', 0)}"
         out += [
             Entry(f"{who}: crossings", CROSSINGS, f"{key}.crossings", "d"),
-            Entry(f"{who}: EI sd / one crossing's", CROSSINGS, f"{key}.sd_ratio", ".2f"),
+            Entry(f"{who}: EI sd / one crossing's", CROSSINGS, f"{key}.sd_ratio", ".3f"),
+            Entry(f"{who}: at most 0.45", CROSSINGS, f"{key}.sd_ratio_target_met", ""),
             Entry(f"{who}: interval holds the truth", CROSSINGS, f"{key}.hit", ""),
+            Entry(f"{who}: z against the truth", CROSSINGS, f"{key}.z", "+.2f"),
+            Entry(f"{who}: converged", CROSSINGS, f"{key}.converged", ""),
             Entry(f"{who}: time [s]", CROSSINGS, f"{key}.runtime_s", ".0f"),
         ]
     return Section(
