@@ -35,3 +35,23 @@ def test_a_density_the_walkers_can_explore_still_converges():
     ch = sample(log_prob, np.zeros(2), np.ones(2), s, seed=3)
     d = mcmc_diagnostics(ch.draws[:, :, 0])
     assert d["rhat"] <= RHAT_MAX and d["ess_bulk"] >= 100
+
+
+def test_walkers_beyond_a_support_edge_at_the_centre_start_inside():
+    """The maximum on the support's edge (a half-normal at 0, as a hyperparameter's maximum on its
+    table's edge): walkers drawn beyond it never get in by halving towards the centre. They must start
+    inside, or emcee compares -inf with -inf and keeps draws outside the support."""
+    from bayespinn.uq.sampler import _inside
+
+    def log_prob(theta):
+        th = np.atleast_2d(theta)
+        return np.where(th[:, 0] >= 0.0, -0.5 * th[:, 0] ** 2, -np.inf)
+
+    p0 = np.random.default_rng(0).standard_normal((16, 1))
+    assert (p0 < 0).any()  # the setting: some walkers beyond the edge
+    start = _inside(log_prob, np.zeros(1), p0)
+    assert np.isfinite(log_prob(start)).all()
+    assert np.unique(start).size > 1  # a cloud, not every walker at the centre
+    s = MCMCSettings(n_walkers=16, n_groups=1, min_steps=200, max_steps=400)
+    ch = sample(log_prob, np.zeros(1), np.ones(1), s, seed=1)
+    assert (ch.draws >= 0.0).all()

@@ -71,13 +71,23 @@ def _group_chain(chain: np.ndarray) -> np.ndarray:
 def _inside(log_prob, center: np.ndarray, p0: np.ndarray, tries: int = 20) -> np.ndarray:
     """Walkers of the initial cloud outside the density's support (at a bound, such as a truncated prior,
     where the maximum may sit) pulled halfway to the center until they are inside: emcee cannot move a
-    walker whose density and proposal are both zero."""
+    walker whose density and proposal are both zero. Where the center itself sits on the support's edge,
+    a walker beyond it never gets in by halving; those left outside move onto the segments from the
+    center to walkers inside (in turn, at distinct fractions of them: inside for a convex support, and no
+    two walkers alike, which emcee refuses)."""
     p0 = p0.copy()
+    bad = np.zeros(p0.shape[0], bool)
     for _ in range(tries):
         bad = ~np.isfinite(np.asarray(log_prob(p0), float))
         if not bad.any():
-            break
+            return p0
         p0[bad] = center[None, :] + 0.5 * (p0[bad] - center[None, :])
+    bad = ~np.isfinite(np.asarray(log_prob(p0), float))
+    good = np.flatnonzero(~bad)
+    if good.size:
+        k = np.arange(int(bad.sum()))
+        frac = (k + 1.0) / (k.size + 1.0)
+        p0[bad] = center[None, :] + frac[:, None] * (p0[good[k % good.size]] - center[None, :])
     return p0
 
 
