@@ -76,7 +76,6 @@ def _inside(log_prob, center: np.ndarray, p0: np.ndarray, tries: int = 20) -> np
     center to walkers inside (in turn, at distinct fractions of them: inside for a convex support, and no
     two walkers alike, which emcee refuses)."""
     p0 = p0.copy()
-    bad = np.zeros(p0.shape[0], bool)
     for _ in range(tries):
         bad = ~np.isfinite(np.asarray(log_prob(p0), float))
         if not bad.any():
