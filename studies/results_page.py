@@ -18,6 +18,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
+from crossings import SD_RATIO_TARGET
 from family import HELD_OUT_SEED
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -501,7 +502,9 @@ def _crossings() -> Section:
         out += [
             Entry(f"{who}: crossings", CROSSINGS, f"{key}.crossings", "d"),
             Entry(f"{who}: EI sd / one crossing's", CROSSINGS, f"{key}.sd_ratio", ".3f"),
-            Entry(f"{who}: at most 0.45", CROSSINGS, f"{key}.sd_ratio_target_met", ""),
+            Entry(
+                f"{who}: at most {SD_RATIO_TARGET:g}", CROSSINGS, f"{key}.sd_ratio_target_met", ""
+            ),
             Entry(f"{who}: interval holds the truth", CROSSINGS, f"{key}.hit", ""),
             Entry(f"{who}: z against the truth", CROSSINGS, f"{key}.z", "+.2f"),
             Entry(f"{who}: converged", CROSSINGS, f"{key}.converged", ""),
